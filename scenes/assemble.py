@@ -1,0 +1,290 @@
+"""Scenario → scene description → Mitsuba scene dictionary.
+
+The scene is first written as a *spec*: plain JSON-able data (shapes as 4×4 matrices,
+materials as reflectances, emitters as groups). The spec is what the render cache
+hashes, so anything that changes the image changes the key. :func:`to_mitsuba`
+turns it into the dictionary ``mitsuba.load_dict`` takes.
+
+Emitter groups: every lit face belongs to the group of its side (``led:red`` …) and the
+luminous ceiling of a room to ``ambient``. The renderer renders one group at a time
+(light transport is linear), so each group's image can be scaled and coloured by its
+own spectrum afterwards. A lit face emits ``1 / A`` W·m⁻²·sr⁻¹ along its normal: one
+W·sr⁻¹ of on-axis LED intensity spread over the face, times cos^(m−1)θ.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
+from scenes.led import led_for_side
+from scenes.scenario import Scenario, ScenarioError
+
+FACE_STANDOFF_M = 2e-4
+"""Lit faces sit 0.2 mm proud of their housing's front plate so the two never coincide."""
+
+
+@dataclass(frozen=True)
+class CropBox:
+    """Region of the full frame that is rendered, in camera pixels (OpenCV convention:
+    pixel (x0, y0) is the crop's top-left pixel)."""
+
+    x0: int
+    y0: int
+    width: int
+    height: int
+
+
+def _frame(z_axis: np.ndarray) -> np.ndarray:
+    """A rotation matrix whose third column is ``z_axis``."""
+    z = z_axis / np.linalg.norm(z_axis)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=1)
+
+
+def _matrix(rot: np.ndarray, centre: np.ndarray, scale=(1.0, 1.0, 1.0)) -> list[list[float]]:
+    m = np.eye(4)
+    m[:3, :3] = rot @ np.diag(scale)
+    m[:3, 3] = centre
+    return np.round(m, 12).tolist()
+
+
+def _disk(centre, normal, radius, material, emitter=None) -> dict:
+    shape = {"type": "disk", "matrix": _matrix(_frame(normal), centre, (radius, radius, 1.0)),
+             "material": material}
+    if emitter is not None:
+        shape["emitter"] = emitter
+    return shape
+
+
+def _cylinder(p0, p1, radius, material) -> dict:
+    return {"type": "cylinder", "p0": list(map(float, p0)), "p1": list(map(float, p1)),
+            "radius": float(radius), "material": material}
+
+
+def _box(centre, axes: np.ndarray, half_sizes, material) -> dict:
+    """An oriented box; ``axes`` columns are its local x, y, z directions."""
+    return {"type": "cube", "matrix": _matrix(axes, centre, half_sizes), "material": material}
+
+
+def _beam(p0, p1, width, material) -> dict:
+    """A square bar of side ``width`` from ``p0`` to ``p1``."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    axes = _frame(p1 - p0)
+    half = (width / 2, width / 2, np.linalg.norm(p1 - p0) / 2)
+    return _box((p0 + p1) / 2, axes, half, material)
+
+
+def target_shapes(design: BeaconDesign, side: str, housing: str) -> list[dict]:
+    """Shapes of one side's target (housings, arms, stalk, lit faces), beacon frame."""
+    rot, trans = target_to_beacon(side, design.d_t_m)
+    world = lambda p: rot @ np.asarray(p, float) + trans  # noqa: E731
+    wdir = lambda d: rot @ np.asarray(d, float)  # noqa: E731
+    mat = f"housing_{housing}"
+    led = led_for_side(side)
+    r_face, r_house = design.lit_face_diameter_m / 2, design.housing_radius_m
+    depth, w = design.housing_depth_m, design.arm_width_m
+    centre = np.array([-design.out_of_plane_m, 0.0, 0.0])  # centre of the in-plane cross
+    shapes: list[dict] = []
+    emitter = {"type": "marker_face", "group": f"led:{side}",
+               "radiance": 1.0 / design.lit_face_area_m2, "exponent": led.cos_exponent - 1.0}
+    for marker in design.markers:
+        p, n = marker.position_m, marker.normal
+        back = p - depth * n
+        shapes.append(_disk(world(p + FACE_STANDOFF_M * n), wdir(n), r_face, "lit_face", emitter))
+        shapes.append(_disk(world(p), wdir(n), r_house, mat))
+        shapes.append(_cylinder(world(back), world(p), r_house, mat))
+        shapes.append(_disk(world(back), wdir(-n), r_house, mat))
+        if marker.id == 1:
+            shapes.append(_beam(world(centre), world(back), w, mat))
+            continue
+        radial = (p - centre) * np.array([0.0, 1.0, 1.0])
+        radial /= np.linalg.norm(radial)
+        if np.allclose(n, radial):  # V1: housing along the arm, arm ends at its back
+            shapes.append(_beam(world(centre), world(back), w, mat))
+        else:  # V2: arm behind the plane, elbow forward into the housing's back
+            elbow = back - (w / 2) * n
+            root = centre - (depth + w / 2) * np.array([1.0, 0.0, 0.0])
+            shapes.append(_beam(world(root), world(elbow), w, mat))
+            shapes.append(_beam(world(elbow), world(back), w, mat))
+    hub = centre - (depth + w / 2) * np.array([1.0, 0.0, 0.0])
+    shapes.append(_box(world(hub), rot, (w, w, w), mat))
+    # stalk from the cross's hub back to the node's surface
+    stalk_end = np.array([-(design.d_t_m - design.node_radius_m) + 1e-3, 0.0, 0.0])
+    shapes.append(_beam(world(hub), world(stalk_end), w, mat))
+    return shapes
+
+
+def beacon_shapes(design: BeaconDesign, housing: str) -> list[dict]:
+    """The node body and all four targets, beacon frame."""
+    mat = f"housing_{housing}"
+    floor_z = design.target_height_m
+    top_z = floor_z - design.node_height_m
+    r = design.node_radius_m
+    shapes = [
+        _cylinder((0, 0, floor_z), (0, 0, top_z), r, mat),
+        _disk(np.array([0.0, 0.0, top_z]), np.array([0.0, 0.0, -1.0]), r, mat),
+    ]
+    for side in SIDE_ANGLE_RAD:
+        shapes += target_shapes(design, side, housing)
+    return shapes
+
+
+def room_extent(scenario: Scenario) -> tuple[np.ndarray, float, float]:
+    """Unit vector from the beacon toward the camera (horizontal) and the box's extent
+    along it: (along, s_back, s_front), with s measured from the beacon axis, m."""
+    cam = scenario.camera_pose().position_m
+    along = np.array([cam[0], cam[1], 0.0])
+    dist = float(np.linalg.norm(along))
+    along = along / dist if dist > 0 else np.array([1.0, 0.0, 0.0])
+    env = scenario.env
+    return along, -env.back_wall_m, dist + env.front_wall_m
+
+
+def _rect(centre, u, v, half_u, half_v, material, emitter=None) -> dict:
+    """A rectangle spanning ±half_u along ``u`` and ±half_v along ``v``; normal u × v."""
+    u, v = np.asarray(u, float), np.asarray(v, float)
+    rot = np.stack([u, v, np.cross(u, v)], axis=1)
+    shape = {"type": "rectangle", "matrix": _matrix(rot, centre, (half_u, half_v, 1.0)),
+             "material": material}
+    if emitter is not None:
+        shape["emitter"] = emitter
+    return shape
+
+
+def environment_shapes(scenario: Scenario) -> list[dict]:
+    """Floor, ceiling and walls of the box around the camera-beacon line."""
+    env, design = scenario.env, scenario.design
+    along, s0, s1 = room_extent(scenario)
+    down = np.array([0.0, 0.0, 1.0])
+    across = np.cross(down, along)
+    floor_z = design.target_height_m
+    ceil_z = floor_z - env.height_m
+    half_l, mid_s = 0.5 * (s1 - s0), 0.5 * (s0 + s1)
+    half_w, half_h, mid_z = env.width_m / 2, env.height_m / 2, 0.5 * (floor_z + ceil_z)
+    mid = mid_s * along + mid_z * down
+    ceiling_emitter = None
+    if env.kind == "room":  # luminous ceiling, unit radiance, scaled after rendering
+        ceiling_emitter = {"type": "area", "group": "ambient", "radiance": 1.0}
+    return [
+        _rect(mid + half_h * down, along, across, half_l, half_w, "floor"),
+        _rect(mid - half_h * down, along, across, half_l, half_w, "wall", ceiling_emitter),
+        _rect(mid + (s0 - mid_s) * along, across, down, half_w, half_h, "wall"),
+        _rect(mid + (s1 - mid_s) * along, across, down, half_w, half_h, "wall"),
+        _rect(mid + half_w * across, along, down, half_l, half_h, "wall"),
+        _rect(mid - half_w * across, along, down, half_l, half_h, "wall"),
+    ]
+
+
+def ceiling_radiance_W_m2_sr(scenario: Scenario) -> float:
+    """Radiance of the room's luminous ceiling giving the environment's illuminance, W·m⁻²·sr⁻¹."""
+    _, s0, s1 = room_extent(scenario)
+    return scenario.env.ceiling_radiance_W_m2_sr(scenario.design.target_height_m, s0, s1)
+
+
+def crop_box(scenario: Scenario) -> CropBox:
+    """The full-frame pixels covering the beacon (all four targets) plus the margin."""
+    from camera_models.geometry import project
+
+    design, geom = scenario.design, scenario.geometry
+    reach = design.arm_length_m + design.housing_radius_m + design.housing_depth_m
+    ext = design.d_t_m + 0.01
+    corners = np.array([[x, y, z] for x in (-ext, ext) for y in (-ext, ext) for z in (-reach, reach)])
+    pose = scenario.camera_pose()
+    if np.any(pose.world_to_camera(corners)[:, 2] <= 0.05):
+        raise ScenarioError(f"range_m: the camera at {scenario.range_m} m is inside or too close to the beacon")
+    uv = project(geom, pose, corners)
+    m = scenario.render.margin_px
+    x0 = max(0, math.floor(uv[:, 0].min()) - m)
+    y0 = max(0, math.floor(uv[:, 1].min()) - m)
+    x1 = min(geom.width_px, math.ceil(uv[:, 0].max()) + m + 1)
+    y1 = min(geom.height_px, math.ceil(uv[:, 1].max()) + m + 1)
+    if x1 <= x0 or y1 <= y0:
+        raise ScenarioError("camera: the beacon is outside the camera's field of view")
+    return CropBox(x0, y0, x1 - x0, y1 - y0)
+
+
+def scene_spec(scenario: Scenario) -> dict:
+    """Plain-data description of everything Mitsuba renders for ``scenario``."""
+    design, env, geom, settings = scenario.design, scenario.env, scenario.geometry, scenario.render
+    pose = scenario.camera_pose()
+    crop = crop_box(scenario)
+    s = settings.oversampling
+    return {
+        "sensor": {
+            "position": pose.position_m.tolist(),
+            "target": (pose.position_m + pose.rotation[2]).tolist(),
+            "up": (-pose.rotation[1]).tolist(),
+            "fov_x_deg": math.degrees(2 * math.atan(geom.width_px / (2 * geom.focal_length_px))),
+            "film": [geom.width_px * s, geom.height_px * s],
+            "crop": [crop.x0 * s, crop.y0 * s, crop.width * s, crop.height * s],
+        },
+        "materials": {
+            "housing_white": design.housing_reflectance["white"],
+            "housing_black": design.housing_reflectance["black"],
+            "lit_face": design.lit_face_reflectance,
+            "wall": env.wall_reflectance,
+            "floor": env.floor_reflectance,
+        },
+        "shapes": beacon_shapes(design, scenario.housing) + environment_shapes(scenario),
+        "max_depth": max(settings.led_max_depth, settings.ambient_max_depth if env.has_ambient else 0),
+    }
+
+
+def emitter_groups(spec: dict) -> list[str]:
+    """Names of the emitter groups in a spec, sorted."""
+    return sorted({sh["emitter"]["group"] for sh in spec["shapes"] if "emitter" in sh})
+
+
+def to_mitsuba(spec: dict, spp: int) -> dict:
+    """The ``mitsuba.load_dict`` dictionary for a spec (active variant)."""
+    import mitsuba as mi
+
+    def xf(matrix):
+        return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64))
+
+    sensor = spec["sensor"]
+    w, h = sensor["film"]
+    cx, cy, cw, ch = sensor["crop"]
+    pixel_format = "luminance" if mi.variant().endswith("mono") else "rgb"
+    scene: dict = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": int(spec["max_depth"]), "hide_emitters": False},
+        "sensor": {
+            "type": "perspective",
+            "fov": sensor["fov_x_deg"],
+            "fov_axis": "x",
+            "near_clip": 1e-3,
+            "far_clip": 1e4,
+            "to_world": mi.ScalarTransform4f().look_at(sensor["position"], sensor["target"], sensor["up"]),
+            "film": {
+                "type": "hdrfilm", "width": w, "height": h, "crop_offset_x": cx, "crop_offset_y": cy,
+                "crop_width": cw, "crop_height": ch, "pixel_format": pixel_format,
+                "component_format": "float32", "rfilter": {"type": "box"}, "sample_border": False,
+            },
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+    }
+    for name, rho in spec["materials"].items():
+        scene[f"mat_{name}"] = {"type": "twosided", "id": f"mat_{name}",
+                                "bsdf": {"type": "diffuse", "reflectance": float(rho)}}
+    for i, sh in enumerate(spec["shapes"]):
+        d: dict = {"type": sh["type"], "bsdf": {"type": "ref", "id": f"mat_{sh['material']}"}}
+        if "matrix" in sh:
+            d["to_world"] = xf(sh["matrix"])
+        if sh["type"] == "cylinder":
+            d.update(p0=sh["p0"], p1=sh["p1"], radius=sh["radius"])
+        if "emitter" in sh:
+            e = sh["emitter"]
+            d["emitter"] = {k: v for k, v in e.items() if k != "group"}
+            if e["type"] == "marker_face":
+                # distinct values: Mitsuba's parser merges identical nested emitter dicts
+                d["emitter"]["instance"] = i
+        scene[f"shape_{i:04d}"] = d
+    return scene

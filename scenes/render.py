@@ -1,0 +1,146 @@
+"""Render a scenario to spectral radiance on the camera's pixel grid.
+
+Only the crop around the beacon is rendered, at ``oversampling``² sub-pixels per camera
+pixel. The scene is loaded once; each emitter group (a side's LEDs, the ambient light)
+is rendered by zeroing the other groups' radiance parameters, so Dr.Jit compiles one
+kernel per scene and reuses it. Renders are cached on disk by a content hash of the
+scene description, render settings, Mitsuba variant and :data:`RENDER_VERSION`; the
+LED drive and the ambient level are not part of the key because they only scale the
+cached unit images (linearity).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from scenes.assemble import (
+    ceiling_radiance_W_m2_sr,
+    crop_box,
+    emitter_groups,
+    scene_spec,
+    to_mitsuba,
+)
+from scenes.led import led_for_side
+from scenes.mitsuba_variant import select_variant
+from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
+from scenes.render_cache import RenderCache, content_key
+from scenes.scenario import Scenario
+
+log = logging.getLogger("beacon_sim")
+
+RENDER_VERSION = 1
+"""Bump when a change to the plugins or the integrator changes rendered values."""
+
+
+def pixel_grid(scenario: Scenario) -> PixelGrid:
+    """The pixel grid a render of ``scenario`` covers."""
+    geom = scenario.geometry
+    crop = crop_box(scenario)
+    return PixelGrid(
+        frame_width_px=geom.width_px,
+        frame_height_px=geom.height_px,
+        focal_length_px=geom.focal_length_px,
+        principal_point_px=geom.principal_point_px,
+        x0=crop.x0,
+        y0=crop.y0,
+        width=crop.width,
+        height=crop.height,
+        oversampling=scenario.render.oversampling,
+    )
+
+
+def render_key(scenario: Scenario, variant: str) -> str:
+    """Cache key of the unit-scale render of ``scenario``."""
+    r = scenario.render
+    return content_key(RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed)
+
+
+def render(scenario: Scenario, cache: RenderCache | None = None) -> SpectralRadiance:
+    """Spectral radiance of ``scenario`` on its pixel grid.
+
+    Parameters
+    ----------
+    scenario
+        What to render.
+    cache
+        Render cache; ``None`` renders without caching.
+
+    Returns
+    -------
+    SpectralRadiance
+        Components ``led:<side>`` (each side's LEDs at the scenario's drive) and, in
+        lit environments, ``ambient``; radiance in W·m⁻²·sr⁻¹ with spectral shapes.
+    """
+    variant = select_variant("mono").variant
+    spec = scene_spec(scenario)
+    key = render_key(scenario, variant)
+    unit = cache.load(key) if cache is not None else None
+    from_cache = unit is not None
+    if unit is None:
+        t0 = time.perf_counter()
+        unit = render_unit_groups(spec, scenario.render.spp, scenario.render.seed)
+        log.info("rendered %s in %.1f s (%s)", list(unit), time.perf_counter() - t0, variant)
+        if cache is not None:
+            cache.store(key, unit)
+    components = tuple(
+        _scaled_component(scenario, group, image) for group, image in sorted(unit.items())
+    )
+    return SpectralRadiance(pixel_grid(scenario), components, scenario.to_dict(), variant, from_cache)
+
+
+def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray) -> RadianceComponent:
+    """Scale a unit render to the scenario's LED drive or ambient level."""
+    if group == "ambient":
+        env = scenario.env
+        factor = ceiling_radiance_W_m2_sr(scenario)
+        shape = env.spectral_shape()
+    else:
+        side = group.split(":", 1)[1]
+        led = led_for_side(side)
+        factor = led.radiant_intensity_W_sr(side_current_mA(scenario, side))
+        shape = led.spectral_shape
+    return RadianceComponent(group, (unit_image * np.float32(factor)).astype(np.float32), shape)
+
+
+def side_current_mA(scenario: Scenario, side: str) -> float:
+    """Drive current of a side's LEDs, mA.
+
+    The visible side runs at the scenario's current; the other sides at the same
+    fraction of their own datasheet current (one dimmer setting for the whole beacon),
+    capped at their absolute maximum.
+    """
+    if side == scenario.side:
+        return scenario.current_mA
+    led = led_for_side(side)
+    fraction = scenario.current_mA / scenario.led.reference_current_mA
+    return min(led.reference_current_mA * fraction, led.max_current_mA)
+
+
+def render_unit_groups(spec: dict, spp: int, seed: int) -> dict[str, np.ndarray]:
+    """Render each emitter group of ``spec`` alone at unit scale.
+
+    Returns images (float32, W·m⁻²·sr⁻¹ per unit of the group's scale: per W·sr⁻¹ of
+    on-axis LED intensity, or per W·m⁻²·sr⁻¹ of ceiling radiance) keyed by group.
+    """
+    import mitsuba as mi
+
+    scene = mi.load_dict(to_mitsuba(spec, spp))
+    params = mi.traverse(scene)
+    by_group: dict[str, list[tuple[str, float]]] = {}
+    for i, shape in enumerate(spec["shapes"]):
+        if "emitter" in shape:
+            prefix = f"shape_{i:04d}.emitter.radiance"
+            key = prefix if prefix in params else f"{prefix}.value"
+            by_group.setdefault(shape["emitter"]["group"], []).append((key, shape["emitter"]["radiance"]))
+    out: dict[str, np.ndarray] = {}
+    for index, group in enumerate(emitter_groups(spec)):
+        for other, entries in by_group.items():
+            for key, value in entries:
+                params[key] = value if other == group else 0.0
+        params.update()
+        image = np.asarray(mi.render(scene, params, seed=seed * 7919 + index, spp=spp))
+        out[group] = np.ascontiguousarray(image.mean(axis=-1), dtype=np.float32)
+    return out

@@ -1,0 +1,114 @@
+"""On-disk cache of renders, keyed by a content hash of everything that affects them.
+
+Entries are single files ``<root>/<key[:2]>/<key>.npz.sha`` holding a 64-byte hex
+SHA-256 of the payload followed by the payload (an ``.npz`` archive). Writes go to a
+temporary file in the same directory, are flushed to disk and renamed into place, so a
+reader sees either nothing or a complete entry. A reader recomputes the digest; an
+entry that fails the check (truncated, bit-flipped) is deleted and reported as a miss.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ENV_CACHE_DIR = "BEACON_SIM_CACHE"
+
+
+def default_cache_dir() -> Path:
+    """``$BEACON_SIM_CACHE``, else ``$XDG_CACHE_HOME/beacon-sim``, else ``~/.cache/beacon-sim``."""
+    if os.environ.get(ENV_CACHE_DIR):
+        return Path(os.environ[ENV_CACHE_DIR])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "beacon-sim"
+
+
+def content_key(*parts: object) -> str:
+    """SHA-256 hex digest of the canonical JSON of ``parts``."""
+    text = json.dumps(parts, sort_keys=True, separators=(",", ":"), default=_json_default)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _json_default(obj: object):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"not JSON-able: {type(obj).__name__}")
+
+
+@dataclass
+class CacheStats:
+    """Counts since the cache object was made."""
+
+    hits: int = 0
+    misses: int = 0
+    corrupt: int = 0
+    writes: int = 0
+
+
+@dataclass
+class RenderCache:
+    """A directory of content-addressed arrays."""
+
+    root: Path = field(default_factory=default_cache_dir)
+    stats: CacheStats = field(default_factory=CacheStats)
+
+    def path(self, key: str) -> Path:
+        """File that holds ``key``."""
+        return Path(self.root) / key[:2] / f"{key}.npz.sha"
+
+    def load(self, key: str) -> dict[str, np.ndarray] | None:
+        """The arrays stored under ``key``, or ``None`` (miss, or corrupt entry removed)."""
+        path = self.path(key)
+        try:
+            blob = path.read_bytes()
+        except FileNotFoundError:
+            self.stats.misses += 1
+            return None
+        digest, payload = blob[:64], blob[64:]
+        try:
+            if hashlib.sha256(payload).hexdigest().encode() != digest:
+                raise ValueError("digest mismatch")
+            with np.load(io.BytesIO(payload), allow_pickle=False) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except (ValueError, OSError, EOFError, KeyError):
+            self.stats.corrupt += 1
+            self.stats.misses += 1
+            path.unlink(missing_ok=True)
+            return None
+        self.stats.hits += 1
+        return arrays
+
+    def store(self, key: str, arrays: dict[str, np.ndarray]) -> Path:
+        """Store ``arrays`` under ``key`` atomically; returns the entry's path."""
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        payload = buf.getvalue()
+        path = self.path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, hashlib.sha256(payload).hexdigest().encode() + payload)
+        self.stats.writes += 1
+        return path
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers never see a partial file."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

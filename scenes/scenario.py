@@ -1,0 +1,209 @@
+"""A scenario: everything that decides what the camera sees, validated.
+
+Pose convention
+---------------
+``range_m`` is the distance from the camera's centre of projection to the lit face of
+marker 1. ``yaw_deg`` is the camera's azimuth about the target's vertical axis, seen
+from marker 1: 0 faces the target squarely, positive puts the camera toward the
+target's +y (the viewer's left), which is the same as turning the beacon by −yaw about
+its vertical (Z-down) axis with the camera fixed. ``camera_height_m`` raises the camera
+above marker 1 (positive up). The camera looks at marker 1 with its image-up along −Z.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from camera_models.geometry import CameraGeometry, CameraPose, camera_geometry
+from scenes.beacon import HOUSING_FINISHES, BeaconDesign, beacon_design, target_to_beacon
+from scenes.environment import Environment, environment
+from scenes.led import LED, led_for_side
+
+
+class ScenarioError(ValueError):
+    """Bad input: the message names the field and what was expected, in one line."""
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How a scenario is rendered.
+
+    Attributes
+    ----------
+    spp
+        Samples per oversampled pixel.
+    oversampling
+        Rendered pixels per camera pixel along each axis.
+    seed
+        Sampler seed; the same seed renders identical bytes.
+    margin_px
+        Camera pixels added around the beacon's projected bounding box.
+    led_max_depth, ambient_max_depth
+        Path lengths for the LED component (direct view + stray light off the housing
+        and environment) and the ambient component (room inter-reflections).
+    """
+
+    spp: int = 16
+    oversampling: int = 3
+    seed: int = 0
+    margin_px: int = 12
+    led_max_depth: int = 4
+    ambient_max_depth: int = 6
+
+    def validate(self) -> None:
+        """Raise :class:`ScenarioError` for impossible settings."""
+        for name in ("spp", "oversampling", "led_max_depth", "ambient_max_depth"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise ScenarioError(f"{name}: expected an integer >= 1, got {v!r}")
+        if not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
+            raise ScenarioError(f"seed: expected an integer in [0, 2^31), got {self.seed!r}")
+        if not isinstance(self.margin_px, int) or self.margin_px < 0:
+            raise ScenarioError(f"margin_px: expected an integer >= 0, got {self.margin_px!r}")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Beacon, side, LED drive, environment, camera and pose.
+
+    Attributes
+    ----------
+    beacon
+        ``v1`` or ``v2``.
+    side
+        Side colour facing the camera: ``red``, ``green``, ``blue`` or ``yellow``.
+    range_m
+        Camera to marker 1, m (> 0).
+    yaw_deg
+        Camera azimuth about the target's vertical axis, degrees in [−90, 90].
+    camera
+        Camera name; here it supplies the pixel grid.
+    environment
+        ``dark``, ``dark-room`` or ``lit-room``.
+    led_current_mA
+        LED drive current, mA; ``None`` means the datasheet test current.
+    camera_height_m
+        Camera height above marker 1, m.
+    housing
+        Housing finish, ``white`` or ``black``.
+    render
+        Render settings.
+    """
+
+    beacon: str = "v2"
+    side: str = "red"
+    range_m: float = 5.0
+    yaw_deg: float = 0.0
+    camera: str = "canon-t6-18mm"
+    environment: str = "dark"
+    led_current_mA: float | None = None
+    camera_height_m: float = 0.0
+    housing: str = "black"
+    render: RenderSettings = field(default_factory=RenderSettings)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    # -- validation -------------------------------------------------------------------
+    def validate(self) -> None:
+        """Raise :class:`ScenarioError` naming the first bad field."""
+        try:
+            beacon_design(self.beacon)
+            led = led_for_side(self.side)
+            camera_geometry(self.camera)
+            environment(self.environment)
+        except ScenarioError:
+            raise
+        except ValueError as exc:
+            raise ScenarioError(str(exc)) from None
+        if not _finite(self.range_m) or self.range_m <= 0:
+            raise ScenarioError(f"range_m: expected a distance > 0 m, got {self.range_m!r}")
+        if not _finite(self.yaw_deg) or abs(self.yaw_deg) > 90:
+            raise ScenarioError(f"yaw_deg: expected an angle in [-90, 90] degrees, got {self.yaw_deg!r}")
+        if not _finite(self.camera_height_m) or abs(self.camera_height_m) >= self.range_m:
+            raise ScenarioError(
+                f"camera_height_m: expected |height| < range_m ({self.range_m} m), got {self.camera_height_m!r}"
+            )
+        if self.housing not in HOUSING_FINISHES:
+            raise ScenarioError(f"housing: expected one of {', '.join(HOUSING_FINISHES)}, got {self.housing!r}")
+        if self.led_current_mA is not None:
+            try:
+                led.check_current(float(self.led_current_mA))
+            except (TypeError, ValueError) as exc:
+                raise ScenarioError(str(exc)) from None
+        self.render.validate()
+
+    # -- derived ----------------------------------------------------------------------
+    @property
+    def design(self) -> BeaconDesign:
+        """The beacon design."""
+        return beacon_design(self.beacon)
+
+    @property
+    def led(self) -> LED:
+        """The LED of the visible side."""
+        return led_for_side(self.side)
+
+    @property
+    def geometry(self) -> CameraGeometry:
+        """The camera's pixel grid."""
+        return camera_geometry(self.camera)
+
+    @property
+    def env(self) -> Environment:
+        """The environment."""
+        return environment(self.environment)
+
+    @property
+    def current_mA(self) -> float:
+        """LED drive current, mA."""
+        return self.led.reference_current_mA if self.led_current_mA is None else float(self.led_current_mA)
+
+    def target_to_world(self):
+        """Rotation and translation from this side's target frame to the beacon frame."""
+        return target_to_beacon(self.side, self.design.d_t_m)
+
+    def camera_position_target_m(self) -> np.ndarray:
+        """Camera centre in the target frame, m."""
+        yaw = math.radians(self.yaw_deg)
+        horizontal = math.sqrt(self.range_m**2 - self.camera_height_m**2)
+        return np.array([horizontal * math.cos(yaw), horizontal * math.sin(yaw), -self.camera_height_m])
+
+    def camera_pose(self) -> CameraPose:
+        """Camera pose in the beacon frame (looking at marker 1, image-up along −Z)."""
+        rot, trans = self.target_to_world()
+        position = rot @ self.camera_position_target_m() + trans
+        return CameraPose.look_at(position, trans)
+
+    def marker_positions_world_m(self) -> np.ndarray:
+        """Lit-face centres of markers 1-5 in the beacon frame, shape (5, 3), m."""
+        rot, trans = self.target_to_world()
+        return self.design.marker_positions_m() @ rot.T + trans
+
+    # -- identity ---------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Plain-data form (JSON-able)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Scenario:
+        """Inverse of :meth:`to_dict`."""
+        data = dict(data)
+        render = RenderSettings(**data.pop("render", {}))
+        return cls(render=render, **data)
+
+    def to_json(self) -> str:
+        """Canonical JSON (sorted keys)."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def _finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
