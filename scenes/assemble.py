@@ -24,7 +24,8 @@ from scenes.led import led_for_side
 from scenes.scenario import Scenario, ScenarioError
 
 FACE_STANDOFF_M = 2e-4
-"""Lit faces sit 0.2 mm proud of their housing's front plate so the two never coincide."""
+"""A housing's front plate sits 0.2 mm behind its lit face so the two never coincide; the
+lit face itself is exactly at the marker position."""
 
 
 @dataclass(frozen=True)
@@ -55,17 +56,21 @@ def _matrix(rot: np.ndarray, centre: np.ndarray, scale=(1.0, 1.0, 1.0)) -> list[
     return np.round(m, 12).tolist()
 
 
-def _disk(centre, normal, radius, material, emitter=None) -> dict:
-    shape = {"type": "disk", "matrix": _matrix(_frame(normal), centre, (radius, radius, 1.0)),
-             "material": material}
+def disk_shape(centre, normal, radius, material, emitter=None) -> dict:
+    shape = {"type": "disk", "matrix": _matrix(_frame(normal), centre, (radius, radius, 1.0)), "material": material}
     if emitter is not None:
         shape["emitter"] = emitter
     return shape
 
 
 def _cylinder(p0, p1, radius, material) -> dict:
-    return {"type": "cylinder", "p0": list(map(float, p0)), "p1": list(map(float, p1)),
-            "radius": float(radius), "material": material}
+    return {
+        "type": "cylinder",
+        "p0": list(map(float, p0)),
+        "p1": list(map(float, p1)),
+        "radius": float(radius),
+        "material": material,
+    }
 
 
 def _box(centre, axes: np.ndarray, half_sizes, material) -> dict:
@@ -92,15 +97,19 @@ def target_shapes(design: BeaconDesign, side: str, housing: str) -> list[dict]:
     depth, w = design.housing_depth_m, design.arm_width_m
     centre = np.array([-design.out_of_plane_m, 0.0, 0.0])  # centre of the in-plane cross
     shapes: list[dict] = []
-    emitter = {"type": "marker_face", "group": f"led:{side}",
-               "radiance": 1.0 / design.lit_face_area_m2, "exponent": led.cos_exponent - 1.0}
+    emitter = {
+        "type": "marker_face",
+        "group": f"led:{side}",
+        "radiance": 1.0 / design.lit_face_area_m2,
+        "exponent": led.cos_exponent - 1.0,
+    }
     for marker in design.markers:
         p, n = marker.position_m, marker.normal
         back = p - depth * n
-        shapes.append(_disk(world(p + FACE_STANDOFF_M * n), wdir(n), r_face, "lit_face", emitter))
-        shapes.append(_disk(world(p), wdir(n), r_house, mat))
+        shapes.append(disk_shape(world(p), wdir(n), r_face, "lit_face", emitter))
+        shapes.append(disk_shape(world(p - FACE_STANDOFF_M * n), wdir(n), r_house, mat))
         shapes.append(_cylinder(world(back), world(p), r_house, mat))
-        shapes.append(_disk(world(back), wdir(-n), r_house, mat))
+        shapes.append(disk_shape(world(back), wdir(-n), r_house, mat))
         if marker.id == 1:
             shapes.append(_beam(world(centre), world(back), w, mat))
             continue
@@ -129,7 +138,7 @@ def beacon_shapes(design: BeaconDesign, housing: str) -> list[dict]:
     r = design.node_radius_m
     shapes = [
         _cylinder((0, 0, floor_z), (0, 0, top_z), r, mat),
-        _disk(np.array([0.0, 0.0, top_z]), np.array([0.0, 0.0, -1.0]), r, mat),
+        disk_shape(np.array([0.0, 0.0, top_z]), np.array([0.0, 0.0, -1.0]), r, mat),
     ]
     for side in SIDE_ANGLE_RAD:
         shapes += target_shapes(design, side, housing)
@@ -147,12 +156,11 @@ def room_extent(scenario: Scenario) -> tuple[np.ndarray, float, float]:
     return along, -env.back_wall_m, dist + env.front_wall_m
 
 
-def _rect(centre, u, v, half_u, half_v, material, emitter=None) -> dict:
+def rect_shape(centre, u, v, half_u, half_v, material, emitter=None) -> dict:
     """A rectangle spanning ±half_u along ``u`` and ±half_v along ``v``; normal u × v."""
     u, v = np.asarray(u, float), np.asarray(v, float)
     rot = np.stack([u, v, np.cross(u, v)], axis=1)
-    shape = {"type": "rectangle", "matrix": _matrix(rot, centre, (half_u, half_v, 1.0)),
-             "material": material}
+    shape = {"type": "rectangle", "matrix": _matrix(rot, centre, (half_u, half_v, 1.0)), "material": material}
     if emitter is not None:
         shape["emitter"] = emitter
     return shape
@@ -173,12 +181,12 @@ def environment_shapes(scenario: Scenario) -> list[dict]:
     if env.kind == "room":  # luminous ceiling, unit radiance, scaled after rendering
         ceiling_emitter = {"type": "area", "group": "ambient", "radiance": 1.0}
     return [
-        _rect(mid + half_h * down, along, across, half_l, half_w, "floor"),
-        _rect(mid - half_h * down, along, across, half_l, half_w, "wall", ceiling_emitter),
-        _rect(mid + (s0 - mid_s) * along, across, down, half_w, half_h, "wall"),
-        _rect(mid + (s1 - mid_s) * along, across, down, half_w, half_h, "wall"),
-        _rect(mid + half_w * across, along, down, half_l, half_h, "wall"),
-        _rect(mid - half_w * across, along, down, half_l, half_h, "wall"),
+        rect_shape(mid + half_h * down, along, across, half_l, half_w, "floor"),
+        rect_shape(mid - half_h * down, along, across, half_l, half_w, "wall", ceiling_emitter),
+        rect_shape(mid + (s0 - mid_s) * along, across, down, half_w, half_h, "wall"),
+        rect_shape(mid + (s1 - mid_s) * along, across, down, half_w, half_h, "wall"),
+        rect_shape(mid + half_w * across, along, down, half_l, half_h, "wall"),
+        rect_shape(mid - half_w * across, along, down, half_l, half_h, "wall"),
     ]
 
 
@@ -193,9 +201,13 @@ def crop_box(scenario: Scenario) -> CropBox:
     from camera_models.geometry import project
 
     design, geom = scenario.design, scenario.geometry
-    reach = design.arm_length_m + design.housing_radius_m + design.housing_depth_m
-    ext = design.d_t_m + 0.01
-    corners = np.array([[x, y, z] for x in (-ext, ext) for y in (-ext, ext) for z in (-reach, reach)])
+    if scenario.render.crop == "target":
+        rot, trans = scenario.target_to_world()
+        corners = design.bounding_points_m() @ rot.T + trans
+    else:
+        reach = design.arm_length_m + design.housing_radius_m + design.housing_depth_m
+        ext = design.d_t_m + 0.01
+        corners = np.array([[x, y, z] for x in (-ext, ext) for y in (-ext, ext) for z in (-reach, reach)])
     pose = scenario.camera_pose()
     if np.any(pose.world_to_camera(corners)[:, 2] <= 0.05):
         raise ScenarioError(f"range_m: the camera at {scenario.range_m} m is inside or too close to the beacon")
@@ -264,16 +276,27 @@ def to_mitsuba(spec: dict, spp: int) -> dict:
             "far_clip": 1e4,
             "to_world": mi.ScalarTransform4f().look_at(sensor["position"], sensor["target"], sensor["up"]),
             "film": {
-                "type": "hdrfilm", "width": w, "height": h, "crop_offset_x": cx, "crop_offset_y": cy,
-                "crop_width": cw, "crop_height": ch, "pixel_format": pixel_format,
-                "component_format": "float32", "rfilter": {"type": "box"}, "sample_border": False,
+                "type": "hdrfilm",
+                "width": w,
+                "height": h,
+                "crop_offset_x": cx,
+                "crop_offset_y": cy,
+                "crop_width": cw,
+                "crop_height": ch,
+                "pixel_format": pixel_format,
+                "component_format": "float32",
+                "rfilter": {"type": "box"},
+                "sample_border": False,
             },
             "sampler": {"type": "independent", "sample_count": spp},
         },
     }
     for name, rho in spec["materials"].items():
-        scene[f"mat_{name}"] = {"type": "twosided", "id": f"mat_{name}",
-                                "bsdf": {"type": "diffuse", "reflectance": float(rho)}}
+        scene[f"mat_{name}"] = {
+            "type": "twosided",
+            "id": f"mat_{name}",
+            "bsdf": {"type": "diffuse", "reflectance": float(rho)},
+        }
     for i, sh in enumerate(spec["shapes"]):
         d: dict = {"type": sh["type"], "bsdf": {"type": "ref", "id": f"mat_{sh['material']}"}}
         if "matrix" in sh:

@@ -151,9 +151,7 @@ def _decide_backend() -> tuple[str, str | None, str]:
     if override:
         backend = override.split("_")[0]
         if backend not in ("cuda", "llvm", "scalar"):
-            raise ValueError(
-                f"{ENV_OVERRIDE}: expected cuda, llvm, scalar or a variant name, got {override!r}"
-            )
+            raise ValueError(f"{ENV_OVERRIDE}: expected cuda, llvm, scalar or a variant name, got {override!r}")
         if backend == "llvm" and not has_llvm:
             raise RuntimeError(f"{ENV_OVERRIDE}={override}: LLVM backend unusable: {llvm_msg}")
         if backend == "cuda" and not has_cuda:

@@ -119,6 +119,32 @@ class SpectralRadiance:
             total += c.image_W_m2_sr
         return total
 
+    def subpixel_solid_angle_sr(self) -> NDArray[np.float64]:
+        """Solid angle of each rendered sub-pixel seen through the pinhole, sr.
+
+        Ω = (p/f)² cos³φ per camera pixel, divided by ``oversampling``²; φ is the angle
+        of the sub-pixel centre off the optical axis. Shape ``PixelGrid.shape``.
+        """
+        g = self.grid
+        u, v = g.subpixel_centres_px()
+        cx, cy = g.principal_point_px
+        r2 = ((u[None, :] - cx) ** 2 + (v[:, None] - cy) ** 2) / g.focal_length_px**2
+        return (1.0 + r2) ** -1.5 / (g.focal_length_px * g.oversampling) ** 2
+
+    def irradiance_at_pupil_W_m2(
+        self, u_px: float, v_px: float, radius_px: float, component: str | None = None
+    ) -> float:
+        """Irradiance at the camera's entrance pupil from a disc of the image, W·m⁻².
+
+        Σ L·Ω over the sub-pixels within ``radius_px`` (camera pixels) of (u, v): for a
+        small source this is its intensity toward the camera over the distance
+        squared, I/R². ``component`` restricts the sum to one component.
+        """
+        u, v = self.grid.subpixel_centres_px()
+        inside = (u[None, :] - u_px) ** 2 + (v[:, None] - v_px) ** 2 <= radius_px**2
+        image = self.total_W_m2_sr() if component is None else self.component(component).image_W_m2_sr
+        return float(np.sum(image * self.subpixel_solid_angle_sr() * inside))
+
     def band_cube_W_m2_sr_nm(self) -> NDArray[np.float32]:
         """Spectral radiance averaged over the 10 nm bands, W·m⁻²·sr⁻¹·nm⁻¹.
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -52,13 +53,17 @@ def pixel_grid(scenario: Scenario) -> PixelGrid:
     )
 
 
-def render_key(scenario: Scenario, variant: str) -> str:
-    """Cache key of the unit-scale render of ``scenario``."""
+def render_key(scenario: Scenario, variant: str, groups: list[str]) -> str:
+    """Cache key of the unit-scale render of ``groups`` of ``scenario``."""
     r = scenario.render
-    return content_key(RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed)
+    return content_key(RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed, groups)
 
 
-def render(scenario: Scenario, cache: RenderCache | None = None) -> SpectralRadiance:
+def render(
+    scenario: Scenario,
+    cache: RenderCache | None = None,
+    groups: Sequence[str] | None = None,
+) -> SpectralRadiance:
     """Spectral radiance of ``scenario`` on its pixel grid.
 
     Parameters
@@ -67,6 +72,8 @@ def render(scenario: Scenario, cache: RenderCache | None = None) -> SpectralRadi
         What to render.
     cache
         Render cache; ``None`` renders without caching.
+    groups
+        Emitter groups to render (``led:red``, ``ambient`` …); default all of them.
 
     Returns
     -------
@@ -76,18 +83,21 @@ def render(scenario: Scenario, cache: RenderCache | None = None) -> SpectralRadi
     """
     variant = select_variant("mono").variant
     spec = scene_spec(scenario)
-    key = render_key(scenario, variant)
+    available = emitter_groups(spec)
+    groups = available if groups is None else sorted(set(groups))
+    unknown = set(groups) - set(available)
+    if unknown:
+        raise ValueError(f"groups: expected some of {available}, got unknown {sorted(unknown)}")
+    key = render_key(scenario, variant, groups)
     unit = cache.load(key) if cache is not None else None
     from_cache = unit is not None
     if unit is None:
         t0 = time.perf_counter()
-        unit = render_unit_groups(spec, scenario.render.spp, scenario.render.seed)
+        unit = render_unit_groups(spec, scenario.render.spp, scenario.render.seed, groups)
         log.info("rendered %s in %.1f s (%s)", list(unit), time.perf_counter() - t0, variant)
         if cache is not None:
             cache.store(key, unit)
-    components = tuple(
-        _scaled_component(scenario, group, image) for group, image in sorted(unit.items())
-    )
+    components = tuple(_scaled_component(scenario, group, image) for group, image in sorted(unit.items()))
     return SpectralRadiance(pixel_grid(scenario), components, scenario.to_dict(), variant, from_cache)
 
 
@@ -119,8 +129,8 @@ def side_current_mA(scenario: Scenario, side: str) -> float:
     return min(led.reference_current_mA * fraction, led.max_current_mA)
 
 
-def render_unit_groups(spec: dict, spp: int, seed: int) -> dict[str, np.ndarray]:
-    """Render each emitter group of ``spec`` alone at unit scale.
+def render_unit_groups(spec: dict, spp: int, seed: int, groups: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Render each emitter group of ``spec`` (or those in ``groups``) alone at unit scale.
 
     Returns images (float32, W·m⁻²·sr⁻¹ per unit of the group's scale: per W·sr⁻¹ of
     on-axis LED intensity, or per W·m⁻²·sr⁻¹ of ceiling radiance) keyed by group.
@@ -137,6 +147,8 @@ def render_unit_groups(spec: dict, spp: int, seed: int) -> dict[str, np.ndarray]
             by_group.setdefault(shape["emitter"]["group"], []).append((key, shape["emitter"]["radiance"]))
     out: dict[str, np.ndarray] = {}
     for index, group in enumerate(emitter_groups(spec)):
+        if groups is not None and group not in groups:
+            continue
         for other, entries in by_group.items():
             for key, value in entries:
                 params[key] = value if other == group else 0.0

@@ -46,6 +46,9 @@ class RenderSettings:
     led_max_depth, ambient_max_depth
         Path lengths for the LED component (direct view + stray light off the housing
         and environment) and the ambient component (room inter-reflections).
+    crop
+        ``beacon``: the region covering all four targets (what a detector may see);
+        ``target``: only the target facing the camera (faster).
     """
 
     spp: int = 16
@@ -54,6 +57,7 @@ class RenderSettings:
     margin_px: int = 12
     led_max_depth: int = 4
     ambient_max_depth: int = 6
+    crop: str = "beacon"
 
     def validate(self) -> None:
         """Raise :class:`ScenarioError` for impossible settings."""
@@ -63,6 +67,8 @@ class RenderSettings:
                 raise ScenarioError(f"{name}: expected an integer >= 1, got {v!r}")
         if not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
             raise ScenarioError(f"seed: expected an integer in [0, 2^31), got {self.seed!r}")
+        if self.crop not in ("beacon", "target"):
+            raise ScenarioError(f"crop: expected 'beacon' or 'target', got {self.crop!r}")
         if not isinstance(self.margin_px, int) or self.margin_px < 0:
             raise ScenarioError(f"margin_px: expected an integer >= 0, got {self.margin_px!r}")
 

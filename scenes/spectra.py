@@ -12,6 +12,7 @@ Band exports (OpenEXR cubes) average the 1 nm spectra over :data:`BAND_EDGES_NM`
 
 from __future__ import annotations
 
+import itertools
 from functools import lru_cache
 
 import colour
@@ -26,9 +27,7 @@ SPECTRAL_SHAPE = colour.SpectralShape(380, 720, 1)
 BAND_CENTRES_NM: NDArray[np.float64] = np.arange(380.0, 720.0 + 0.5, 10.0)
 """Centres of the 10 nm export bands, nm."""
 
-BAND_EDGES_NM: NDArray[np.float64] = np.concatenate(
-    [BAND_CENTRES_NM - 5.0, [BAND_CENTRES_NM[-1] + 5.0]]
-)
+BAND_EDGES_NM: NDArray[np.float64] = np.concatenate([BAND_CENTRES_NM - 5.0, [BAND_CENTRES_NM[-1] + 5.0]])
 
 K_M_LM_PER_W = 683.002
 """Maximum luminous efficacy of photopic vision, lm/W (CIE 018:2019; 683 lm/W at 540 THz)."""
@@ -59,9 +58,7 @@ def led_shape(peak_wavelength_nm: float, fwhm_nm: float) -> NDArray[np.float64]:
     fwhm_nm
         Full width at half maximum, nm.
     """
-    sd = colour.sd_single_led(
-        peak_wavelength_nm, half_spectral_width=fwhm_nm, shape=SPECTRAL_SHAPE
-    )
+    sd = colour.sd_single_led(peak_wavelength_nm, half_spectral_width=fwhm_nm, shape=SPECTRAL_SHAPE)
     out = normalise_shape(sd.values)
     out.setflags(write=False)
     return out
@@ -73,9 +70,17 @@ def dominant_wavelength_nm(shape: NDArray[np.float64]) -> float:
     This is how LED datasheets specify colour (CIE 1931 2° observer, resolution 1 nm).
     """
     sd = colour.SpectralDistribution(dict(zip(WAVELENGTHS_NM, shape, strict=True)))
-    xy = colour.XYZ_to_xy(colour.sd_to_XYZ(sd))
+    with colour.utilities.suppress_warnings(colour_runtime_warnings=True):
+        xyz = colour.sd_to_XYZ(sd, cmfs=cie1931_cmfs(), illuminant=colour.sd_ones(SPECTRAL_SHAPE))
+    xy = colour.XYZ_to_xy(xyz)
     white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["E"]
-    return float(colour.dominant_wavelength(xy, white)[0])
+    return float(colour.dominant_wavelength(xy, white, cmfs=cie1931_cmfs())[0])
+
+
+@lru_cache(maxsize=1)
+def cie1931_cmfs() -> colour.MultiSpectralDistributions:
+    """CIE 1931 2° colour-matching functions on the project's grid."""
+    return colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(SPECTRAL_SHAPE)
 
 
 @lru_cache(maxsize=64)
@@ -88,9 +93,7 @@ def peak_for_dominant_nm(dominant_nm: float, fwhm_nm: float) -> float:
     finer than the 1 nm resolution of the dominant wavelength itself.
     """
     candidates = np.arange(dominant_nm - 20.0, dominant_nm + 20.0 + 1e-9, 0.25)
-    errors = np.array(
-        [abs(dominant_wavelength_nm(led_shape(float(p), fwhm_nm)) - dominant_nm) for p in candidates]
-    )
+    errors = np.array([abs(dominant_wavelength_nm(led_shape(float(p), fwhm_nm)) - dominant_nm) for p in candidates])
     best = np.flatnonzero(errors == errors.min())
     return float(np.median(candidates[best]))
 
@@ -131,7 +134,7 @@ def band_average(values: NDArray[np.float64], axis: int = -1) -> NDArray[np.floa
     """
     values = np.moveaxis(np.asarray(values, dtype=np.float64), axis, -1)
     out = np.empty((*values.shape[:-1], BAND_CENTRES_NM.size))
-    for i, (lo, hi) in enumerate(zip(BAND_EDGES_NM[:-1], BAND_EDGES_NM[1:], strict=True)):
+    for i, (lo, hi) in enumerate(itertools.pairwise(BAND_EDGES_NM)):
         sel = (WAVELENGTHS_NM >= lo) & (WAVELENGTHS_NM <= hi)
         out[..., i] = np.trapezoid(values[..., sel], WAVELENGTHS_NM[sel], axis=-1) / (
             WAVELENGTHS_NM[sel][-1] - WAVELENGTHS_NM[sel][0]

@@ -1,0 +1,1 @@
+"""Sweeps, metrics, maximum-range estimation, reports and the command line."""

@@ -1,0 +1,256 @@
+"""The ``beacon-sim`` command line.
+
+Every command that writes results writes JSON beside its pictures. Bad input ends the
+program with one line on stderr naming the field and what was expected (exit code 2).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.table import Table
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="Simulate how cameras see self-lit LED beacons.",
+)
+console = Console(stderr=True)
+
+
+class UsageError(ValueError):
+    """Bad command-line input (one-line message)."""
+
+
+def _setup_logging(verbose: bool) -> None:
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING,
+        format="%(message)s",
+        handlers=[RichHandler(console=console, show_path=False, show_time=False)],
+    )
+    logging.getLogger("beacon_sim").setLevel(logging.INFO)
+
+
+@app.callback()
+def _root(verbose: Annotated[bool, typer.Option("--verbose", "-v", help="More log output.")] = False):
+    _setup_logging(verbose)
+
+
+def prepare_out_dir(out: Path) -> Path:
+    """Create ``out`` and check it is writable, or raise :class:`UsageError`."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(f"out: cannot write to {out} ({exc.strerror or exc})") from None
+    return out
+
+
+@app.command()
+def beacons(json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
+    """List the beacon designs and their marker geometry."""
+    from scenes.beacon import load_beacons
+
+    rows = []
+    for b in load_beacons().values():
+        rows.append(
+            {
+                "name": b.name,
+                "description": b.description,
+                "d_t_mm": b.d_t_m * 1e3,
+                "lit_face_diameter_mm": b.lit_face_diameter_m * 1e3,
+                "markers": [
+                    {"id": m.id, "position_mm": (m.position_m * 1e3).round(3).tolist(), "led_axis": m.normal.tolist()}
+                    for m in b.markers
+                ],
+            }
+        )
+    if json_out:
+        print(json.dumps(rows, indent=2))
+        return
+    table = Table(title="Beacon designs (target frame: x toward viewer, y viewer's left, z down; mm)")
+    for col in ("name", "marker", "position (x, y, z) mm", "LED axis", "description"):
+        table.add_column(col)
+    for r in rows:
+        for m in r["markers"]:
+            table.add_row(
+                r["name"] if m["id"] == 1 else "",
+                str(m["id"]),
+                "({:.0f}, {:.0f}, {:.0f})".format(*m["position_mm"]),
+                "({:+.0f}, {:+.0f}, {:+.0f})".format(*m["led_axis"]),
+                r["description"] if m["id"] == 1 else "",
+            )
+    Console().print(table)
+
+
+@app.command()
+def cameras(json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
+    """List the camera models with their key figures."""
+    from camera_models.geometry import camera_geometry, camera_names
+
+    rows = []
+    for name in camera_names():
+        g = camera_geometry(name)
+        rows.append(
+            {
+                "name": name,
+                "description": g.description,
+                "width_px": g.width_px,
+                "height_px": g.height_px,
+                "pixel_pitch_um": g.pixel_pitch_um,
+                "focal_length_mm": round(g.focal_length_mm, 4),
+                "horizontal_fov_deg": round(g.horizontal_fov_deg, 2),
+                "pixel_angle_mrad": round(1e3 / g.focal_length_px, 4),
+            }
+        )
+    if json_out:
+        print(json.dumps(rows, indent=2))
+        return
+    table = Table(title="Cameras")
+    for col in ("name", "resolution", "pixel µm", "focal mm", "HFOV °", "pixel mrad", "description"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            r["name"],
+            f"{r['width_px']}×{r['height_px']}",
+            f"{r['pixel_pitch_um']:g}",
+            f"{r['focal_length_mm']:.2f}",
+            f"{r['horizontal_fov_deg']:.1f}",
+            f"{r['pixel_angle_mrad']:.3f}",
+            r["description"],
+        )
+    Console().print(table)
+
+
+# options shared by render and (later) capture
+BeaconOpt = Annotated[str, typer.Option("--beacon", help="Beacon design: v1 or v2.")]
+SideOpt = Annotated[str, typer.Option("--side", help="Side facing the camera: red, green, blue, yellow.")]
+RangeOpt = Annotated[float, typer.Option("--range-m", help="Camera to marker 1, m.")]
+YawOpt = Annotated[float, typer.Option("--yaw-deg", help="Camera azimuth about the target's vertical axis, degrees.")]
+CameraOpt = Annotated[str, typer.Option("--camera", help="Camera model (see 'beacon-sim cameras').")]
+EnvOpt = Annotated[str, typer.Option("--environment", help="dark, dark-room or lit-room.")]
+CurrentOpt = Annotated[
+    float | None, typer.Option("--led-current-ma", help="LED drive current, mA (default: datasheet test current).")
+]
+HeightOpt = Annotated[float, typer.Option("--camera-height-m", help="Camera height above marker 1, m.")]
+HousingOpt = Annotated[str, typer.Option("--housing", help="Housing finish: black or white.")]
+SppOpt = Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")]
+OversamplingOpt = Annotated[int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (same seed, same bytes).")]
+
+
+@app.command()
+def render(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    beacon: BeaconOpt = "v2",
+    side: SideOpt = "red",
+    range_m: RangeOpt = 5.0,
+    yaw_deg: YawOpt = 10.0,
+    camera: CameraOpt = "canon-t6-18mm",
+    environment: EnvOpt = "dark",
+    led_current_ma: CurrentOpt = None,
+    camera_height_m: HeightOpt = 0.0,
+    housing: HousingOpt = "black",
+    spp: SppOpt = 16,
+    oversampling: OversamplingOpt = 3,
+    seed: SeedOpt = 0,
+    cube: Annotated[bool, typer.Option("--cube", help="Also write the 10 nm band cube (radiance_cube.exr).")] = False,
+    no_cache: Annotated[bool, typer.Option("--no-cache", help="Render even if a cached render exists.")] = False,
+) -> None:
+    """Render spectral radiance of a beacon on a camera's pixel grid (crop around the beacon)."""
+    from scenes.render_cache import RenderCache
+    from scenes.scenario import RenderSettings, Scenario
+
+    scenario = Scenario(
+        beacon=beacon,
+        side=side,
+        range_m=range_m,
+        yaw_deg=yaw_deg,
+        camera=camera,
+        environment=environment,
+        led_current_mA=led_current_ma,
+        camera_height_m=camera_height_m,
+        housing=housing,
+        render=RenderSettings(spp=spp, oversampling=oversampling, seed=seed),
+    )
+    prepare_out_dir(out)
+    write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
+
+
+def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
+    """Render ``scenario`` and write radiance.exr, preview.png and render.json to ``out``."""
+    from camera_models.geometry import project
+    from scenes.radiance_io import write_band_cube_exr, write_preview_png, write_radiance_exr
+    from scenes.render import render as render_scenario
+
+    t0 = time.perf_counter()
+    with console.status(f"rendering {scenario.beacon} {scenario.side} at {scenario.range_m} m ..."):
+        radiance = render_scenario(scenario, cache)
+    elapsed = time.perf_counter() - t0
+    files = {
+        "radiance": write_radiance_exr(out / "radiance.exr", radiance).name,
+        "preview": write_preview_png(out / "preview.png", radiance).name,
+    }
+    if cube:
+        files["band_cube"] = write_band_cube_exr(out / "radiance_cube.exr", radiance).name
+    uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
+    meta = {
+        "scenario": scenario.to_dict(),
+        "variant": radiance.variant,
+        "from_cache": radiance.from_cache,
+        "render_seconds": round(elapsed, 3),
+        "pixel_grid": radiance.grid.to_dict(),
+        "components": [
+            {"name": c.name, "peak_radiance_W_m2_sr": float(c.image_W_m2_sr.max()), "led_current_mA": None}
+            for c in radiance.components
+        ],
+        "markers_ground_truth_px": [{"id": i + 1, "u": float(p[0]), "v": float(p[1])} for i, p in enumerate(uv)],
+        "files": files,
+    }
+    from scenes.render import side_current_mA
+
+    for c in meta["components"]:
+        if c["name"].startswith("led:"):
+            c["led_current_mA"] = side_current_mA(scenario, c["name"][4:])
+    from scenes.render_cache import atomic_write_bytes
+
+    atomic_write_bytes(out / "render.json", json.dumps(meta, indent=2).encode())
+    console.print(
+        f"wrote {out}/ ({', '.join(files.values())}, render.json) "
+        f"in {elapsed:.1f} s{' [cache]' if radiance.from_cache else ''}"
+    )
+    return meta
+
+
+def main() -> None:
+    """Console-script entry point: turn bad input into one line on stderr."""
+    try:
+        app(standalone_mode=False)
+    except ValueError as exc:  # UsageError, ScenarioError, DataFileError, other validation
+        _fail(str(exc))
+    except Exception as exc:
+        if hasattr(exc, "format_message"):  # click/typer usage errors (NoSuchOption, ...)
+            _fail(exc.format_message().replace("\n", " "))
+        raise
+
+
+def _fail(message: str) -> None:
+    print(f"beacon-sim: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    main()

@@ -1,0 +1,22 @@
+"""Shared fixtures: an isolated render cache per test session, quiet logging."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _isolated_cache(tmp_path_factory):
+    """Keep the user's render cache out of the tests."""
+    os.environ["BEACON_SIM_CACHE"] = str(tmp_path_factory.mktemp("render-cache"))
+    yield
+
+
+@pytest.fixture(scope="session")
+def mitsuba_variant():
+    """Activate the best Mitsuba variant once (mono)."""
+    from scenes.mitsuba_variant import select_variant
+
+    return select_variant("mono")

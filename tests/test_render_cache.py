@@ -1,0 +1,89 @@
+"""Determinism, render cache, atomic writes and corruption recovery."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from scenes.radiance_io import read_radiance_exr, write_radiance_exr
+from scenes.render import render, render_key
+from scenes.render_cache import RenderCache
+from scenes.scenario import RenderSettings, Scenario
+
+pytestmark = pytest.mark.usefixtures("mitsuba_variant")
+
+SMALL = Scenario(
+    beacon="v2",
+    side="green",
+    range_m=8.0,
+    yaw_deg=10.0,
+    environment="lit-room",
+    render=RenderSettings(spp=4, oversampling=1, seed=7),
+)
+
+
+def _digest(radiance) -> str:
+    h = hashlib.sha256()
+    for c in radiance.components:
+        h.update(c.name.encode())
+        h.update(c.image_W_m2_sr.tobytes())
+    return h.hexdigest()
+
+
+def test_same_seed_same_bytes_and_second_call_is_cached(tmp_path):
+    cache = RenderCache(tmp_path / "cache")
+    first = render(SMALL, cache)
+    second = render(SMALL, cache)
+    uncached = render(SMALL, None)
+    assert not first.from_cache and second.from_cache
+    assert cache.stats.writes == 1 and cache.stats.hits == 1
+    assert _digest(first) == _digest(second) == _digest(uncached)
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    write_radiance_exr(a, first)
+    write_radiance_exr(b, second)
+    assert a.read_bytes() == b.read_bytes()
+    back = read_radiance_exr(a)
+    assert _digest(back) == _digest(first) and back.grid == first.grid
+
+
+def test_other_seed_differs():
+    other = Scenario(**{**SMALL.__dict__, "render": RenderSettings(spp=4, oversampling=1, seed=8)})
+    assert _digest(render(other)) != _digest(render(SMALL))
+
+
+def test_led_drive_scales_cached_render_without_rerendering(tmp_path):
+    cache = RenderCache(tmp_path / "cache")
+    full = render(SMALL, cache)
+    half = render(Scenario(**{**SMALL.__dict__, "led_current_mA": 10.0}), cache)
+    assert cache.stats.writes == 1 and half.from_cache
+    ratio = 0.5**SMALL.led.current_exponent
+    np.testing.assert_allclose(
+        half.component("led:green").image_W_m2_sr, full.component("led:green").image_W_m2_sr * ratio, rtol=1e-6
+    )
+    np.testing.assert_array_equal(half.component("ambient").image_W_m2_sr, full.component("ambient").image_W_m2_sr)
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip"])
+def test_corrupt_entry_is_detected_and_rerendered(tmp_path, damage):
+    cache = RenderCache(tmp_path / "cache")
+    good = render(SMALL, cache)
+    path = cache.path(render_key(SMALL, good.variant, [c.name for c in good.components]))
+    blob = bytearray(path.read_bytes())
+    if damage == "truncate":
+        path.write_bytes(bytes(blob[: len(blob) // 2]))
+    else:
+        blob[len(blob) // 2] ^= 0xFF
+        path.write_bytes(bytes(blob))
+    again = render(SMALL, cache)
+    assert cache.stats.corrupt == 1 and not again.from_cache
+    assert _digest(again) == _digest(good)
+    assert render(SMALL, cache).from_cache
+
+
+def test_no_temporary_files_are_left_behind(tmp_path):
+    cache = RenderCache(tmp_path / "cache")
+    render(SMALL, cache)
+    leftovers = [p for p in (tmp_path / "cache").rglob("*") if p.is_file() and p.suffix == ".tmp"]
+    assert leftovers == []
