@@ -189,6 +189,23 @@ def render(
     write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
 
 
+@app.command("main-job")
+def main_job(out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job")) -> None:
+    """Run the main job on the built-in default scenario.
+
+    Renders the V2 beacon's red side at 5 m and 10° yaw for the Canon T6 + 18 mm in the
+    cave's dark zone, at the default render settings, and writes the radiance, a
+    preview and the metadata to OUT.
+    """
+    from scenes.render_cache import RenderCache
+    from scenes.scenario import Scenario
+
+    prepare_out_dir(out)
+    scenario = Scenario(beacon="v2", side="red", range_m=5.0, yaw_deg=10.0, camera="canon-t6-18mm")
+    write_render(out, scenario, RenderCache())
+    console.print(f"main job done: look at {out / 'preview.png'}")
+
+
 def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
     """Render ``scenario`` and write radiance.exr, preview.png and render.json to ``out``."""
     from camera_models.geometry import project
