@@ -271,3 +271,18 @@ def _fail(message: str) -> None:
 if __name__ == "__main__":
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
     main()
+
+
+def _register_command_modules() -> None:
+    """Commands defined in other modules register themselves on ``app`` when imported."""
+    import importlib
+
+    for name in ("studies.cli_camera", "studies.cli_pipeline"):
+        try:
+            importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+
+
+_register_command_modules()
