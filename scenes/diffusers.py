@@ -106,8 +106,10 @@ class Paper:
 
     def at(self, wavelength_nm: float) -> tuple[float, float]:
         """(R₁, T₁) at one wavelength (linear interpolation)."""
-        return (float(np.interp(wavelength_nm, spectra.WAVELENGTHS_NM, self.reflectance)),
-                float(np.interp(wavelength_nm, spectra.WAVELENGTHS_NM, self.transmittance)))
+        return (
+            float(np.interp(wavelength_nm, spectra.WAVELENGTHS_NM, self.reflectance)),
+            float(np.interp(wavelength_nm, spectra.WAVELENGTHS_NM, self.transmittance)),
+        )
 
 
 @lru_cache(maxsize=1)

@@ -131,7 +131,7 @@ def select_variant(mode: str = "mono") -> VariantChoice:
 
     if mi.variant() != variant:
         mi.set_variant(variant)
-        from scenes.emitters import register_plugins
+        from scenes.plugins import register_plugins
 
         register_plugins()
     return VariantChoice(_active.backend, variant, _active.reason)
