@@ -14,10 +14,11 @@ absorption K_dye(λ)X derived from a measured reflectance spectrum (see the data
 Foam
 ----
 Closed-cell foam is a homogeneous scattering medium filling the housing's aperture,
-described by its reduced optical depth τ' = σs(1 − g)t and single-scattering albedo.
-By the similarity relation the renderer uses isotropic scattering with the reduced
-coefficient σs' = τ'/t, which reproduces diffuse transmission and the spatial spread
-with far fewer scattering events than a forward-peaked phase function.
+described by its reduced optical depth τ' = σs(1 − g)t, anisotropy g (Henyey–Greenstein
+phase function) and single-scattering albedo. The renderer uses the real extinction
+σt = τ'/((1 − g)t): an isotropic medium with the reduced coefficient would give the same
+diffuse transmission but let e^(−τ') of the LED's beam through unscattered, a hot spot
+a real foam does not have.
 """
 
 from __future__ import annotations
@@ -153,23 +154,24 @@ def colour_module_patch(dataset: str, patch: str) -> NDArray[np.float64]:
 # -- foam ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Foam:
-    """Closed-cell foam slab: thickness (m), reduced optical depth and albedo."""
+    """Closed-cell foam slab: thickness (m), reduced optical depth, HG anisotropy g, albedo."""
 
     thickness_m: float
     reduced_optical_depth: float
+    anisotropy: float
     single_scattering_albedo: float
 
     @property
     def sigma_t_per_m(self) -> float:
-        """Extinction coefficient of the isotropic-equivalent medium, m⁻¹."""
-        return self.reduced_optical_depth / self.thickness_m
+        """Extinction coefficient σt = τ' / ((1 − g) t), m⁻¹ (absorption is tiny)."""
+        return self.reduced_optical_depth / ((1.0 - self.anisotropy) * self.thickness_m)
 
 
 @lru_cache(maxsize=1)
 def default_foam() -> Foam:
     """The foam of ``scenes/data/diffusers.toml``."""
     f = _paper_data()["foam"]
-    return Foam(f["thickness_mm"] * 1e-3, f["reduced_optical_depth"], f["single_scattering_albedo"])
+    return Foam(f["thickness_mm"] * 1e-3, f["reduced_optical_depth"], f["anisotropy"], f["single_scattering_albedo"])
 
 
 def foam_transmittance_diffusion(reduced_optical_depth: float, albedo: float = 1.0) -> float:
