@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
+from scenes.diffusers import paper
 from scenes.led import led_for_side
 from scenes.scenario import Scenario, ScenarioError
 
@@ -86,7 +87,44 @@ def _beam(p0, p1, width, material) -> dict:
     return _box((p0 + p1) / 2, axes, half, material)
 
 
-def target_shapes(design: BeaconDesign, side: str, housing: str) -> list[dict]:
+def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
+    """The lit-face emitter of a side's markers and the face's reflectance.
+
+    Bare LEDs: radiance 1/A along the normal × cos^(m−1)θ (one W·sr⁻¹ on axis). With
+    diffusers: the near-field exit radiance L(r, θ) per W·sr⁻¹ as a texture.
+    """
+    from scenes.near_field import NearFieldSettings, marker_emission
+
+    design, led, config = scenario.design, led_for_side(side), scenario.diffuser
+    group = f"led:{side}"
+    if config.is_bare:
+        emitter = {
+            "type": "marker_face",
+            "group": group,
+            "radiance": 1.0 / design.lit_face_area_m2,
+            "exponent": led.cos_exponent - 1.0,
+        }
+        return emitter, design.lit_face_reflectance
+    emission = marker_emission(
+        design, led, scenario.housing, config, side, settings=NearFieldSettings(spp=scenario.render.near_field_spp)
+    )
+    emitter = {
+        "type": "marker_face",
+        "group": group,
+        "radiance": 1.0,
+        "exponent": 0.0,
+        "profile": np.round(emission.profile_per_m2, 9).tolist(),
+    }
+    if config.paper_sheets:
+        reflectance = float(paper(config.paper_colour_for(side)).at(emission.reference_wavelength_nm)[0])
+    else:
+        reflectance = 0.8  # foam face: white polyethylene (assumed, as the foam's albedo suggests)
+    return emitter, reflectance
+
+
+def target_shapes(
+    design: BeaconDesign, side: str, housing: str, emitter: dict | None = None, face_material: str = "lit_face"
+) -> list[dict]:
     """Shapes of one side's target (housings, arms, stalk, lit faces), beacon frame."""
     rot, trans = target_to_beacon(side, design.d_t_m)
     world = lambda p: rot @ np.asarray(p, float) + trans  # noqa: E731
@@ -97,16 +135,17 @@ def target_shapes(design: BeaconDesign, side: str, housing: str) -> list[dict]:
     depth, w = design.housing_depth_m, design.arm_width_m
     centre = np.array([-design.out_of_plane_m, 0.0, 0.0])  # centre of the in-plane cross
     shapes: list[dict] = []
-    emitter = {
-        "type": "marker_face",
-        "group": f"led:{side}",
-        "radiance": 1.0 / design.lit_face_area_m2,
-        "exponent": led.cos_exponent - 1.0,
-    }
+    if emitter is None:  # bare LED faces
+        emitter = {
+            "type": "marker_face",
+            "group": f"led:{side}",
+            "radiance": 1.0 / design.lit_face_area_m2,
+            "exponent": led.cos_exponent - 1.0,
+        }
     for marker in design.markers:
         p, n = marker.position_m, marker.normal
         back = p - depth * n
-        shapes.append(disk_shape(world(p), wdir(n), r_face, "lit_face", emitter))
+        shapes.append(disk_shape(world(p), wdir(n), r_face, face_material, emitter))
         shapes.append(disk_shape(world(p - FACE_STANDOFF_M * n), wdir(n), r_house, mat))
         shapes.append(_cylinder(world(back), world(p), r_house, mat))
         shapes.append(disk_shape(world(back), wdir(-n), r_house, mat))
@@ -130,8 +169,9 @@ def target_shapes(design: BeaconDesign, side: str, housing: str) -> list[dict]:
     return shapes
 
 
-def beacon_shapes(design: BeaconDesign, housing: str) -> list[dict]:
-    """The node body and all four targets, beacon frame."""
+def beacon_shapes(scenario: Scenario) -> tuple[list[dict], dict[str, float]]:
+    """The node body and all four targets (beacon frame), and the lit faces' materials."""
+    design, housing = scenario.design, scenario.housing
     mat = f"housing_{housing}"
     floor_z = design.target_height_m
     top_z = floor_z - design.node_height_m
@@ -140,9 +180,12 @@ def beacon_shapes(design: BeaconDesign, housing: str) -> list[dict]:
         _cylinder((0, 0, floor_z), (0, 0, top_z), r, mat),
         disk_shape(np.array([0.0, 0.0, top_z]), np.array([0.0, 0.0, -1.0]), r, mat),
     ]
+    face_materials: dict[str, float] = {}
     for side in SIDE_ANGLE_RAD:
-        shapes += target_shapes(design, side, housing)
-    return shapes
+        emitter, reflectance = face_emitter(scenario, side)
+        face_materials[f"face_{side}"] = reflectance
+        shapes += target_shapes(design, side, housing, emitter, f"face_{side}")
+    return shapes, face_materials
 
 
 def room_extent(scenario: Scenario) -> tuple[np.ndarray, float, float]:
@@ -228,6 +271,7 @@ def scene_spec(scenario: Scenario) -> dict:
     pose = scenario.camera_pose()
     crop = crop_box(scenario)
     s = settings.oversampling
+    shapes, face_materials = beacon_shapes(scenario)
     return {
         "sensor": {
             "position": pose.position_m.tolist(),
@@ -240,11 +284,11 @@ def scene_spec(scenario: Scenario) -> dict:
         "materials": {
             "housing_white": design.housing_reflectance["white"],
             "housing_black": design.housing_reflectance["black"],
-            "lit_face": design.lit_face_reflectance,
+            **face_materials,
             "wall": env.wall_reflectance,
             "floor": env.floor_reflectance,
         },
-        "shapes": beacon_shapes(design, scenario.housing) + environment_shapes(scenario),
+        "shapes": shapes + environment_shapes(scenario),
         "max_depth": max(settings.led_max_depth, settings.ambient_max_depth if env.has_ambient else 0),
     }
 
@@ -305,7 +349,16 @@ def to_mitsuba(spec: dict, spp: int) -> dict:
             d.update(p0=sh["p0"], p1=sh["p1"], radius=sh["radius"])
         if "emitter" in sh:
             e = sh["emitter"]
-            d["emitter"] = {k: v for k, v in e.items() if k != "group"}
+            d["emitter"] = {k: v for k, v in e.items() if k not in ("group", "profile")}
+            if "profile" in e:
+                table = np.asarray(e["profile"], dtype=np.float32)[..., None]
+                d["emitter"]["profile"] = {
+                    "type": "bitmap",
+                    "data": mi.TensorXf(table),
+                    "raw": True,
+                    "filter_type": "bilinear",
+                    "wrap_mode": "clamp",
+                }
             if e["type"] == "marker_face":
                 # distinct values: Mitsuba's parser merges identical nested emitter dicts
                 d["emitter"]["instance"] = i

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from scenes import spectra
 from scenes.assemble import (
     ceiling_radiance_W_m2_sr,
     crop_box,
@@ -26,6 +27,7 @@ from scenes.assemble import (
 )
 from scenes.led import led_for_side
 from scenes.mitsuba_variant import select_variant
+from scenes.near_field import exit_spectral_factor
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 from scenes.render_cache import RenderCache, content_key
 from scenes.scenario import Scenario
@@ -110,8 +112,13 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray) ->
     else:
         side = group.split(":", 1)[1]
         led = led_for_side(side)
-        factor = led.radiant_intensity_W_sr(side_current_mA(scenario, side))
-        shape = led.spectral_shape
+        # the unit render holds radiance per W·sr⁻¹ of LED intensity at the reference
+        # wavelength; the diffusers' spectral factor turns it into the band integral
+        spectral_factor, _ = exit_spectral_factor(scenario.diffuser, side, led)
+        exit_spectrum = led.spectral_shape * spectral_factor
+        transmitted = spectra.integrate_nm(exit_spectrum)
+        factor = led.radiant_intensity_W_sr(side_current_mA(scenario, side)) * transmitted
+        shape = exit_spectrum / transmitted if transmitted > 0 else led.spectral_shape
     return RadianceComponent(group, (unit_image * np.float32(factor)).astype(np.float32), shape)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from camera_models.geometry import CameraGeometry, CameraPose, camera_geometry
 from scenes.beacon import HOUSING_FINISHES, BeaconDesign, beacon_design, target_to_beacon
+from scenes.diffusers import DiffuserConfig
 from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
 
@@ -49,6 +50,9 @@ class RenderSettings:
     crop
         ``beacon``: the region covering all four targets (what a detector may see);
         ``target``: only the target facing the camera (faster).
+    near_field_spp
+        Samples per pixel of the near-field marker renders (diffusers), cached per
+        configuration.
     """
 
     spp: int = 16
@@ -58,10 +62,11 @@ class RenderSettings:
     led_max_depth: int = 4
     ambient_max_depth: int = 6
     crop: str = "beacon"
+    near_field_spp: int = 1024
 
     def validate(self) -> None:
         """Raise :class:`ScenarioError` for impossible settings."""
-        for name in ("spp", "oversampling", "led_max_depth", "ambient_max_depth"):
+        for name in ("spp", "oversampling", "led_max_depth", "ambient_max_depth", "near_field_spp"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
                 raise ScenarioError(f"{name}: expected an integer >= 1, got {v!r}")
@@ -97,6 +102,9 @@ class Scenario:
         Camera height above marker 1, m.
     housing
         Housing finish, ``white`` or ``black``.
+    foam, paper_sheets, paper_colour
+        Diffusers in front of every LED: foam disc on/off, 0-5 sheets of paper, paper
+        colour (``white``, ``matched`` = each side's own colour, or a fixed colour).
     render
         Render settings.
     """
@@ -110,6 +118,9 @@ class Scenario:
     led_current_mA: float | None = None
     camera_height_m: float = 0.0
     housing: str = "black"
+    foam: bool = False
+    paper_sheets: int = 0
+    paper_colour: str = "white"
     render: RenderSettings = field(default_factory=RenderSettings)
 
     def __post_init__(self) -> None:
@@ -137,6 +148,10 @@ class Scenario:
             )
         if self.housing not in HOUSING_FINISHES:
             raise ScenarioError(f"housing: expected one of {', '.join(HOUSING_FINISHES)}, got {self.housing!r}")
+        try:
+            self.diffuser.validate()
+        except ValueError as exc:
+            raise ScenarioError(str(exc)) from None
         if self.led_current_mA is not None:
             try:
                 led.check_current(float(self.led_current_mA))
@@ -145,6 +160,11 @@ class Scenario:
         self.render.validate()
 
     # -- derived ----------------------------------------------------------------------
+    @property
+    def diffuser(self) -> DiffuserConfig:
+        """The diffuser configuration of every marker."""
+        return DiffuserConfig(self.foam, self.paper_sheets, self.paper_colour)
+
     @property
     def design(self) -> BeaconDesign:
         """The beacon design."""
