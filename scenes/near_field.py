@@ -298,16 +298,17 @@ def marker_emission(
     cache: RenderCache | None = None,
     settings: NearFieldSettings | None = None,
 ) -> MarkerEmission:
-    """Exit radiance of a marker with diffusers (rendered once, then cached).
+    """Exit radiance of a marker (rendered once, then cached).
 
-    Raises ``ValueError`` for a bare marker, whose emission is analytic (the LED itself).
+    The beacon-scale render uses the analytic LED for bare markers; rendering a bare
+    marker here is how the near-field machinery is checked against that analytic LED.
     """
-    if config.is_bare:
-        raise ValueError("diffuser: a bare LED needs no near-field render")
     settings = settings or NearFieldSettings()
     variant = select_variant("mono").variant
     spec = near_field_spec(design, led, housing, config, side)
     angles = (0.0,) if config.paper_sheets else settings.foam_angles_deg
+    if config.is_bare:  # the LED's cos^20 beam needs fine angles near the axis
+        angles = (0.0, 4.0, 8.0, 12.0, 16.0, 20.0, 25.0, 30.0, 40.0, 60.0, 82.0)
     factor, lam_ref = exit_spectral_factor(config, side, led)
     key = content_key(
         "near-field",

@@ -146,6 +146,11 @@ CurrentOpt = Annotated[
 ]
 HeightOpt = Annotated[float, typer.Option("--camera-height-m", help="Camera height above marker 1, m.")]
 HousingOpt = Annotated[str, typer.Option("--housing", help="Housing finish: black or white.")]
+FoamOpt = Annotated[bool, typer.Option("--foam/--no-foam", help="Foam disc behind the paper of every marker.")]
+SheetsOpt = Annotated[int, typer.Option("--paper-sheets", help="Sheets of paper in front of every LED, 0-5.")]
+PaperColourOpt = Annotated[
+    str, typer.Option("--paper-colour", help="white, matched (each side's own colour), red, green, blue, yellow.")
+]
 SppOpt = Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")]
 OversamplingOpt = Annotated[int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed (same seed, same bytes).")]
@@ -163,6 +168,9 @@ def render(
     led_current_ma: CurrentOpt = None,
     camera_height_m: HeightOpt = 0.0,
     housing: HousingOpt = "black",
+    foam: FoamOpt = False,
+    paper_sheets: SheetsOpt = 0,
+    paper_colour: PaperColourOpt = "white",
     spp: SppOpt = 16,
     oversampling: OversamplingOpt = 3,
     seed: SeedOpt = 0,
@@ -183,6 +191,9 @@ def render(
         led_current_mA=led_current_ma,
         camera_height_m=camera_height_m,
         housing=housing,
+        foam=foam,
+        paper_sheets=paper_sheets,
+        paper_colour=paper_colour,
         render=RenderSettings(spp=spp, oversampling=oversampling, seed=seed),
     )
     prepare_out_dir(out)
@@ -209,6 +220,7 @@ def main_job(out: Annotated[Path, typer.Option("--out", help="Output directory."
 def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
     """Render ``scenario`` and write radiance.exr, preview.png and render.json to ``out``."""
     from camera_models.geometry import project
+    from scenes.marker_photometry import marker_figures
     from scenes.radiance_io import write_band_cube_exr, write_preview_png, write_radiance_exr
     from scenes.render import render as render_scenario
 
@@ -224,6 +236,14 @@ def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
         files["band_cube"] = write_band_cube_exr(out / "radiance_cube.exr", radiance).name
     uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
     meta = {
+        "marker_configuration": {
+            "foam": scenario.foam,
+            "paper_sheets": scenario.paper_sheets,
+            "paper_colour": scenario.diffuser.paper_colour_for(scenario.side),
+            "housing": scenario.housing,
+            "led_current_mA": scenario.current_mA,
+        },
+        "markers": marker_figures(scenario, radiance),
         "scenario": scenario.to_dict(),
         "variant": radiance.variant,
         "from_cache": radiance.from_cache,
