@@ -100,12 +100,19 @@ class MarkerEmission:
     def intensity_per_W_sr(self, theta_deg: float) -> float:
         """Radiant intensity of the face toward θ per W·sr⁻¹ of LED intensity (ratio).
 
-        I(θ) = cos θ ∫ L(r, θ) 2πr dr, with L interpolated linearly in θ.
+        I(θ) = cos θ ∫ L(r, θ) 2πr dr at the table's angles, interpolated between them
+        in log(I/cos θ) (exact for a Gaussian-like lobe such as cosᵐ, and never above
+        the true value for a log-concave one); a one-row table is Lambertian.
         """
         edges = self.radial_edges_m
         areas = np.pi * (edges[1:] ** 2 - edges[:-1] ** 2)
-        row = np.array([np.interp(theta_deg, self.theta_deg, col) for col in self.profile_per_m2.T])
-        return float(math.cos(math.radians(theta_deg)) * np.sum(row * areas))
+        per_cos = self.profile_per_m2 @ areas  # I(θ_i) / cos θ_i
+        c = math.cos(math.radians(theta_deg))
+        if per_cos.size == 1:
+            return float(c * per_cos[0])
+        if np.all(per_cos > 0):
+            return float(c * math.exp(np.interp(theta_deg, self.theta_deg, np.log(per_cos))))
+        return float(c * np.interp(theta_deg, self.theta_deg, per_cos))
 
     def exit_flux_per_W_sr(self) -> float:
         """Total flux leaving the face per W·sr⁻¹ of LED intensity, W/(W·sr⁻¹) = sr.
