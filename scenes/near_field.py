@@ -207,6 +207,54 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
     }
 
 
+def marker_objects(spec: dict, to_world: NDArray[np.float64] | None = None, prefix: str = "") -> dict:
+    """Mitsuba dictionary entries (materials, medium, shapes) of a near-field spec,
+    optionally moved by the 4×4 matrix ``to_world`` (the marker's pose in a larger scene)."""
+    import mitsuba as mi
+
+    m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
+    scale = float(np.cbrt(abs(np.linalg.det(m[:3, :3]))))
+    out: dict = {
+        f"{prefix}mat_housing": {
+            "type": "twosided",
+            "id": f"{prefix}mat_housing",
+            "bsdf": {"type": "diffuse", "reflectance": spec["materials"]["housing"]},
+        },
+        f"{prefix}mat_led_body": {
+            "type": "twosided",
+            "id": f"{prefix}mat_led_body",
+            "bsdf": {"type": "diffuse", "reflectance": spec["materials"]["led_body"]},
+        },
+        f"{prefix}mat_sheet": {"type": "diffuse_sheet", "id": f"{prefix}mat_sheet", **spec["sheet"]},
+        f"{prefix}mat_null": {"type": "null", "id": f"{prefix}mat_null"},
+    }
+    if spec["medium"]:
+        out[f"{prefix}foam"] = {
+            "type": "homogeneous",
+            "id": f"{prefix}foam",
+            "sigma_t": spec["medium"]["sigma_t_per_m"] / scale,
+            "albedo": spec["medium"]["albedo"],
+            "phase": {"type": "hg", "g": spec["medium"]["g"]},
+        }
+    for i, sh in enumerate(spec["shapes"]):
+        d: dict = {"type": sh["type"], "bsdf": {"type": "ref", "id": f"{prefix}mat_{sh['material']}"}}
+        if "matrix" in sh:
+            d["to_world"] = mi.ScalarTransform4f(m @ np.asarray(sh["matrix"]))
+        if sh["type"] == "cylinder":
+            p0 = (m @ np.array([*sh["p0"], 1.0]))[:3]
+            p1 = (m @ np.array([*sh["p1"], 1.0]))[:3]
+            d.update(p0=p0.tolist(), p1=p1.tolist(), radius=sh["radius"] * scale)
+        if "interior" in sh:
+            d["interior"] = {"type": "ref", "id": f"{prefix}{sh['interior']}"}
+        if "emitter" in sh:
+            e = {k: v for k, v in sh["emitter"].items() if k != "group"}
+            if e.get("type") == "marker_face":
+                e["radiance"] = e["radiance"] / scale**2
+            d["emitter"] = e
+        out[f"{prefix}shape_{i:03d}"] = d
+    return out
+
+
 def _to_mitsuba(spec: dict, settings: NearFieldSettings, view_deg: float) -> dict:
     import mitsuba as mi
 
@@ -215,7 +263,7 @@ def _to_mitsuba(spec: dict, settings: NearFieldSettings, view_deg: float) -> dic
     eye = 0.1 * np.array([math.sin(t), 0.0, math.cos(t)])
     sensor_xf = mi.ScalarTransform4f().look_at(eye.tolist(), [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]).scale([half, half, 1.0])
     pixel_format = "luminance" if mi.variant().endswith("mono") else "rgb"
-    scene: dict = {
+    return {
         "type": "scene",
         "integrator": {"type": "volpath", "max_depth": 2048, "rr_depth": 256},
         "sensor": {
@@ -233,39 +281,8 @@ def _to_mitsuba(spec: dict, settings: NearFieldSettings, view_deg: float) -> dic
             },
             "sampler": {"type": "independent", "sample_count": settings.spp},
         },
-        "mat_housing": {
-            "type": "twosided",
-            "id": "mat_housing",
-            "bsdf": {"type": "diffuse", "reflectance": spec["materials"]["housing"]},
-        },
-        "mat_led_body": {
-            "type": "twosided",
-            "id": "mat_led_body",
-            "bsdf": {"type": "diffuse", "reflectance": spec["materials"]["led_body"]},
-        },
-        "mat_sheet": {"type": "diffuse_sheet", "id": "mat_sheet", **spec["sheet"]},
-        "mat_null": {"type": "null", "id": "mat_null"},
+        **marker_objects(spec),
     }
-    if spec["medium"]:
-        scene["foam"] = {
-            "type": "homogeneous",
-            "id": "foam",
-            "sigma_t": spec["medium"]["sigma_t_per_m"],
-            "albedo": spec["medium"]["albedo"],
-            "phase": {"type": "hg", "g": spec["medium"]["g"]},
-        }
-    for i, sh in enumerate(spec["shapes"]):
-        d: dict = {"type": sh["type"], "bsdf": {"type": "ref", "id": f"mat_{sh['material']}"}}
-        if "matrix" in sh:
-            d["to_world"] = mi.ScalarTransform4f(np.asarray(sh["matrix"]))
-        if sh["type"] == "cylinder":
-            d.update(p0=sh["p0"], p1=sh["p1"], radius=sh["radius"])
-        if "interior" in sh:
-            d["interior"] = {"type": "ref", "id": sh["interior"]}
-        if "emitter" in sh:
-            d["emitter"] = {k: v for k, v in sh["emitter"].items() if k != "group"}
-        scene[f"shape_{i:03d}"] = d
-    return scene
 
 
 def _radial_profile(image: NDArray[np.float64], radius_m: float, view_deg: float, bins: int) -> NDArray[np.float64]:
