@@ -200,6 +200,32 @@ def render(
     write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
 
 
+@app.command()
+def bench(json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False) -> None:
+    """Measure speed-ups as ratios, side by side in one run."""
+    from studies.bench import two_stage_vs_brute_force
+
+    with console.status("two-stage vs brute-force marker rendering ..."):
+        two_stage = two_stage_vs_brute_force()
+    from scenes.mitsuba_variant import active_variant
+
+    result = {"variant": active_variant().variant, "two_stage_vs_brute_force": two_stage}
+    if json_out:
+        print(json.dumps(result, indent=2))
+        return
+    t = Table(title=f"beacon-sim bench ({result['variant']})")
+    for col in ("measurement", "fast", "slow", "ratio"):
+        t.add_column(col)
+    ts, bf = two_stage["two_stage"], two_stage["brute_force"]
+    t.add_row(
+        f"marker to {two_stage['target_rms']:.0%} RMS: two-stage vs brute force",
+        f"{ts['seconds_to_target']:.3g} s (incl. {ts['near_field_precompute_s']:.2g} s precompute)",
+        f"{bf['seconds_to_target']:.3g} s",
+        f"{two_stage['ratio']:.0f}× ({two_stage['ratio_cached']:.0f}× cached)",
+    )
+    Console().print(t)
+
+
 @app.command("main-job")
 def main_job(out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job")) -> None:
     """Run the main job on the built-in default scenario.
