@@ -226,6 +226,25 @@ def bench(json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] 
     Console().print(t)
 
 
+@app.command("diffuser-mosaic")
+def diffuser_mosaic_cmd(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    side: SideOpt = "red",
+    paper_colour: PaperColourOpt = "white",
+    housing: HousingOpt = "white",
+) -> None:
+    """One marker at 150 mm with 0-5 sheets of paper, without and with foam, as a PNG."""
+    from studies.mosaic import diffuser_mosaic
+
+    prepare_out_dir(out)
+    with console.status("rendering the diffuser mosaic (near-field renders are cached) ..."):
+        fluxes = diffuser_mosaic(out / "diffuser_mosaic.png", side, paper_colour, housing)
+    from scenes.render_cache import atomic_write_bytes
+
+    atomic_write_bytes(out / "diffuser_mosaic.json", json.dumps({"relative_flux": fluxes}, indent=2).encode())
+    console.print(f"wrote {out / 'diffuser_mosaic.png'} and diffuser_mosaic.json")
+
+
 @app.command("main-job")
 def main_job(out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job")) -> None:
     """Run the main job on the built-in default scenario.
