@@ -23,6 +23,7 @@ with the spectral integral done once per component, never per pixel.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -174,7 +175,7 @@ def relative_illumination(camera: Camera, f_number: float, u_px, v_px) -> NDArra
             return pa(entries[0])
         if n >= entries[-1].f_number:
             return pa(entries[-1])
-        for lo, hi in zip(entries[:-1], entries[1:], strict=True):
+        for lo, hi in itertools.pairwise(entries):
             if lo.f_number <= n <= hi.f_number:
                 w = (1 / lo.f_number - 1 / n) / (1 / lo.f_number - 1 / hi.f_number)
                 return (1 - w) * pa(lo) + w * pa(hi)
@@ -222,7 +223,7 @@ def psf_kernel(
     lam_eff = float(np.sum(w10 * lam_nm)) * 1e-9
     sigma_m = camera.lens.blur_sigma_um * 1e-6
     radius_m = max(4.0 * sigma_m, 6.0 * 1.22 * lam_eff * n, 1.5 * pitch_m)
-    half = int(math.ceil(radius_m / sub_m))
+    half = math.ceil(radius_m / sub_m)
     offsets = (np.arange(-half, half + 1)) * sub_m
     fine = (np.array([-1.0, 0.0, 1.0]) / 3.0) * sub_m
     xx = (offsets[:, None] + fine[None, :]).ravel()

@@ -48,7 +48,7 @@ def test_camera_equation_at_centre(name):
 def _lensfun(cam):
     lensfunpy = pytest.importorskip("lensfunpy")
     db = lensfunpy.Database()
-    body = [c for c in db.find_cameras("Canon") if c.model == cam.lens.lensfun_camera][0]
+    body = next(c for c in db.find_cameras("Canon") if c.model == cam.lens.lensfun_camera)
     lens = db.find_lenses(body, "Canon", cam.lens.lensfun_lens.removeprefix("Canon "))[0]
     g = cam.geometry
     mod = lensfunpy.Modifier(lens, body.crop_factor, g.width_px, g.height_px)
@@ -66,7 +66,7 @@ def test_vignetting_matches_lensfun_toward_corners(name):
     assert mod.apply_color_modification(ones)
     cx, cy = g.principal_point_px
     for frac in (0.25, 0.5, 0.75, 0.97):
-        u, v = int(round(cx * (1 - frac))), int(round(cy * (1 - frac)))
+        u, v = round(cx * (1 - frac)), round(cy * (1 - frac))
         ours = float(relative_illumination(cam, cam.lens.f_number, u, v))
         theirs = 1.0 / float(ones[v, u, 1])
         assert ours == pytest.approx(theirs, rel=0.01), (frac, ours, theirs)
@@ -98,8 +98,8 @@ def test_distortion_matches_lensfun(name):
     fy, fx = corrected[:, 1], corrected[:, 0]
     theirs = np.stack(
         [
-            np.array([np.interp(x, np.arange(g.width_px), src[int(round(y)), :, 0]) for x, y in zip(fx, fy)]),
-            np.array([np.interp(y, np.arange(g.height_px), src[:, int(round(x)), 1]) for x, y in zip(fx, fy)]),
+            np.array([np.interp(x, np.arange(g.width_px), src[round(y), :, 0]) for x, y in zip(fx, fy, strict=False)]),
+            np.array([np.interp(y, np.arange(g.height_px), src[:, round(x), 1]) for x, y in zip(fx, fy, strict=False)]),
         ],
         axis=-1,
     )
