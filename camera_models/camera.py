@@ -155,7 +155,7 @@ class ISPModel:
     demosaic: str
     white_balance: str  # "daylight" or "auto"
     awb_max_gain_ratio: float
-    camera_to_xyz: NDArray[np.float64]  # 3×3, camera RGB (white-balanced for D65) -> XYZ
+    camera_to_xyz: NDArray[np.float64]  # 3×3, white-balanced camera RGB -> XYZ (D65 white)
     tone_curve: str
     jpeg_quality: int
     chroma_subsampling: str
@@ -302,8 +302,11 @@ def load_camera(name: str) -> Camera:
         analog_gain_at_max_code=None if uses_iso else float(s["analog_gain_at_max_code"]),
     )
     i = body["isp"]
-    if "xyz_to_camera" in i:
-        camera_to_xyz = np.linalg.inv(_matrix(i["xyz_to_camera"]))
+    if "xyz_to_camera" in i:  # DNG-style matrix for raw (unbalanced) camera RGB; make it act on balanced RGB
+        xyz_to_camera = _matrix(i["xyz_to_camera"])
+        d65 = np.array([0.95047, 1.0, 1.08883])  # CIE D65 white, Y = 1 (CIE 15:2004)
+        neutral = xyz_to_camera @ d65
+        camera_to_xyz = np.linalg.inv(xyz_to_camera) @ np.diag(neutral / neutral[1])
     else:
         camera_to_xyz = camera_to_xyz_from_ssf(qe)
     isp = ISPModel(
