@@ -183,10 +183,10 @@ def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]
     h, w = cap.raw.shape
     out = []
     for i, ((u, v), r) in enumerate(zip(uv, radius_px, strict=True)):
-        c0 = max(int(math.floor(u - r)) - cap.x0, 0)
-        c1 = min(int(math.ceil(u + r)) - cap.x0 + 1, w)
-        r0 = max(int(math.floor(v - r)) - cap.y0, 0)
-        r1 = min(int(math.ceil(v + r)) - cap.y0 + 1, h)
+        c0 = max(math.floor(u - r) - cap.x0, 0)
+        c1 = min(math.ceil(u + r) - cap.x0 + 1, w)
+        r0 = max(math.floor(v - r) - cap.y0, 0)
+        r1 = min(math.ceil(v + r) - cap.y0 + 1, h)
         uu, vv = np.meshgrid(np.arange(c0, max(c1, c0)) + cap.x0, np.arange(r0, max(r1, r0)) + cap.y0)
         core = (uu - u) ** 2 + (vv - v) ** 2 <= r * r
         n = int(core.sum())

@@ -111,7 +111,7 @@ def auto_exposure(camera: Camera, meter: Callable[[float, float], float]) -> Exp
         wanted_gain = min(max(total / t, 1.0), g_max)
         if code is not None:
             span = s.gain_code_max - s.gain_code_min
-            code = int(round(s.gain_code_min + (wanted_gain - 1.0) / (s.analog_gain_at_max_code - 1.0) * span))
+            code = round(s.gain_code_min + (wanted_gain - 1.0) / (s.analog_gain_at_max_code - 1.0) * span)
             code = min(max(code, s.gain_code_min), s.gain_code_max)
             gain = s.analog_gain(gain_code=code)
         else:

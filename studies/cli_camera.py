@@ -206,7 +206,7 @@ def capture(
     atomic_write_bytes(out / "raw.png", raw_png.tobytes())
     h, w = cap.image.rgb8.shape[:2]
     step = max(1, int(np.ceil(max(w, h) / 1600)))
-    ok, preview = cv2.imencode(".png", np.ascontiguousarray(cap.image.rgb8[::step, ::step, ::-1]))
+    _ok, preview = cv2.imencode(".png", np.ascontiguousarray(cap.image.rgb8[::step, ::step, ::-1]))
     atomic_write_bytes(out / "preview.png", preview.tobytes())
     markers = marker_core_saturation(cap, cam, scenario)
     meta = {
