@@ -111,7 +111,8 @@ def encode_jpeg(rgb8: NDArray[np.uint8], camera: Camera) -> bytes:
     """JPEG bytes at the camera's quality and chroma subsampling."""
     if camera.isp.chroma_subsampling not in SUBSAMPLING_FLAGS:
         raise ValueError(
-            f"isp.chroma_subsampling: expected one of {', '.join(SUBSAMPLING_FLAGS)}, got {camera.isp.chroma_subsampling!r}"
+            f"isp.chroma_subsampling: expected one of {', '.join(SUBSAMPLING_FLAGS)}, "
+            f"got {camera.isp.chroma_subsampling!r}"
         )
     params = [
         cv2.IMWRITE_JPEG_QUALITY,

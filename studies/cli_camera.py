@@ -202,7 +202,7 @@ def capture(
     with console.status(f"capturing with {camera} ..."):
         cap = run_capture(radiance, cam, seed, background=background, exposure=exposure, f_number=f_number)
     atomic_write_bytes(out / "image.jpg", cap.image.jpeg)
-    ok, raw_png = cv2.imencode(".png", cap.raw)
+    _ok, raw_png = cv2.imencode(".png", cap.raw)
     atomic_write_bytes(out / "raw.png", raw_png.tobytes())
     h, w = cap.image.rgb8.shape[:2]
     step = max(1, int(np.ceil(max(w, h) / 1600)))
