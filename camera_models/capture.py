@@ -1,0 +1,204 @@
+"""One frame through the whole camera: render → lens → exposure → sensor → ISP → JPEG.
+
+The crop around the beacon comes from :func:`scenes.render.render` at full detail;
+the rest of the frame, when a background render (:mod:`scenes.background`) is given,
+from that cheap low-resolution render (camera equation and relative illumination, no
+PSF), so automatic exposure meters the whole frame and the saved image is full size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from camera_models.camera import Camera
+from camera_models.exposure import ExposureSettings, auto_exposure, manual_exposure
+from camera_models.isp import ProcessedImage, process
+from camera_models.optics import (
+    RadialMapping,
+    camera_equation_factor_m2_sr,
+    electrons_per_joule,
+    optical_image,
+    relative_illumination,
+)
+from camera_models.sensor import SensorSettings, expose, mosaic
+from scenes.radiance import SpectralRadiance
+
+
+@dataclass(frozen=True)
+class Capture:
+    """What the camera produced, with the settings it chose.
+
+    Attributes
+    ----------
+    raw
+        Raw mosaic (DN, uint16) of the frame region ``(x0, y0)`` + shape.
+    image
+        The ISP's output (8-bit sRGB and JPEG bytes).
+    exposure
+        Exposure settings used.
+    x0, y0
+        Frame position of ``raw``'s top-left pixel (0, 0 for a full frame).
+    saturated_fraction
+        Fraction of the raw pixels at the clip level.
+    """
+
+    raw: NDArray[np.uint16]
+    image: ProcessedImage
+    exposure: ExposureSettings
+    x0: int
+    y0: int
+    saturated_fraction: float
+
+
+def background_electrons_per_s(background: SpectralRadiance, camera: Camera, f_number: float) -> NDArray[np.float64]:
+    """Electrons per second per camera pixel and channel on the low-resolution background grid (rows, cols, 3)."""
+    g = background.grid
+    scale = camera.geometry.width_px / g.frame_width_px
+    factor = camera_equation_factor_m2_sr(camera.lens, f_number, camera.pixel_area_m2)
+    out = np.zeros((g.height, g.width, 3))
+    for comp in background.components:
+        if comp.spectral_shape_per_nm is None:
+            continue
+        out += comp.image_W_m2_sr[..., None] * (
+            factor * electrons_per_joule(comp.spectral_shape_per_nm, camera.sensor.qe_rgb)
+        )
+    u = (np.arange(g.width) + 0.5) * scale - 0.5
+    v = (np.arange(g.height) + 0.5) * scale - 0.5
+    return out * relative_illumination(camera, f_number, u[None, :], v[:, None])[..., None]
+
+
+def full_frame(
+    crop_e: NDArray[np.float64], x0: int, y0: int, camera: Camera, background_e: NDArray[np.float64] | None
+) -> NDArray[np.float32]:
+    """Full-frame mean electrons (rows, cols, 3): background upsampled (nearest), crop pasted in."""
+    g = camera.geometry
+    if background_e is None:
+        frame = np.zeros((g.height_px, g.width_px, 3), dtype=np.float32)
+    else:
+        scale = math.ceil(g.width_px / background_e.shape[1])
+        frame = np.repeat(np.repeat(background_e.astype(np.float32), scale, axis=0), scale, axis=1)
+        frame = np.ascontiguousarray(frame[: g.height_px, : g.width_px])
+    h, w = crop_e.shape[:2]
+    frame[y0 : y0 + h, x0 : x0 + w] = crop_e
+    return frame
+
+
+def frame_meter(
+    crop_e_per_s: NDArray[np.float64], x0: int, y0: int, camera: Camera, background_e_per_s: NDArray[np.float64] | None
+):
+    """``meter(exposure_s, gain)``: full-frame mean green signal as a fraction of the clip level."""
+    g, s = camera.geometry, camera.sensor
+    full_scale_DN = s.white_level_DN - s.black_level_DN
+    crop = crop_e_per_s[..., 1].ravel()
+    if background_e_per_s is not None:
+        scale = g.width_px / background_e_per_s.shape[1]
+        bh, bw = background_e_per_s.shape[:2]
+        cu = (np.arange(bw) + 0.5) * scale
+        cv = (np.arange(bh) + 0.5) * scale
+        h, w = crop_e_per_s.shape[:2]
+        inside = ((cu >= x0) & (cu < x0 + w))[None, :] & ((cv >= y0) & (cv < y0 + h))[:, None]
+        bg = background_e_per_s[..., 1][~inside]
+        bg_weight = (g.width_px * g.height_px - crop.size) / max(bg.size, 1)
+    else:
+        bg, bg_weight = np.zeros(0), 0.0
+
+    def meter(exposure_s: float, gain: float) -> float:
+        k = exposure_s * s.K_DN_per_e(gain) / full_scale_DN
+        total = np.minimum(crop * k, 1.0).sum() + bg_weight * np.minimum(bg * k, 1.0).sum()
+        return float(total / (g.width_px * g.height_px))
+
+    return meter
+
+
+def capture(
+    radiance: SpectralRadiance,
+    camera: Camera,
+    seed: int,
+    background: SpectralRadiance | None = None,
+    exposure: ExposureSettings | None = None,
+    f_number: float | None = None,
+    full: bool = True,
+) -> Capture:
+    """Simulate the frame the camera records for a render.
+
+    Parameters
+    ----------
+    radiance
+        The render of the crop around the beacon.
+    camera
+        The camera.
+    seed
+        Seed of the sensor's temporal noise (same seed → same bytes).
+    background
+        Low-resolution full-frame render for metering and the rest of the frame.
+    exposure
+        Settings to use; default manual settings of a DSLR, auto exposure of a webcam.
+    f_number
+        Working f-number; default the lens's.
+    full
+        Produce the full frame (else only the crop).
+    """
+    if not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    n = camera.lens.f_number if f_number is None else f_number
+    opt = optical_image(radiance, camera, 1.0, n)  # electrons per second
+    bg = background_electrons_per_s(background, camera, n) if background is not None else None
+    if exposure is None:
+        if camera.exposure.mode == "auto":
+            exposure = auto_exposure(camera, frame_meter(opt.electrons_rgb, opt.x0, opt.y0, camera, bg))
+        else:
+            exposure = manual_exposure(camera)
+    t = exposure.exposure_s
+    if full:
+        mean_rgb = full_frame(opt.electrons_rgb * t, opt.x0, opt.y0, camera, None if bg is None else bg * t)
+        x0 = y0 = 0
+    else:
+        mean_rgb, x0, y0 = opt.electrons_rgb * t, opt.x0, opt.y0
+    mean = mosaic(mean_rgb, camera.sensor.cfa, x0, y0)
+    del mean_rgb
+    raw = expose(mean, camera.sensor, SensorSettings(t, exposure.analog_gain), seed, x0, y0)
+    clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)
+    image = process(raw, camera, x0, y0)
+    return Capture(raw, image, exposure, x0, y0, float(np.mean(raw >= clip)))
+
+
+def marker_pixels(camera: Camera, scenario) -> NDArray[np.float64]:
+    """Where the real (distorting) lens images markers 1-5, (5, 2) camera pixels."""
+    from camera_models.geometry import project
+
+    uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
+    return RadialMapping(camera).distort_points_px(uv)
+
+
+def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]:
+    """Per marker: pixels of its lit face's image (at least the 1-px disc) and the fraction clipped in the raw."""
+    uv = marker_pixels(camera, scenario)
+    depth = scenario.camera_pose().world_to_camera(scenario.marker_positions_world_m())[:, 2]
+    radius_px = np.maximum(0.5 * scenario.design.lit_face_diameter_m * camera.geometry.focal_length_px / depth, 1.0)
+    clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)
+    h, w = cap.raw.shape
+    out = []
+    for i, ((u, v), r) in enumerate(zip(uv, radius_px, strict=True)):
+        c0 = max(math.floor(u - r) - cap.x0, 0)
+        c1 = min(math.ceil(u + r) - cap.x0 + 1, w)
+        r0 = max(math.floor(v - r) - cap.y0, 0)
+        r1 = min(math.ceil(v + r) - cap.y0 + 1, h)
+        uu, vv = np.meshgrid(np.arange(c0, max(c1, c0)) + cap.x0, np.arange(r0, max(r1, r0)) + cap.y0)
+        core = (uu - u) ** 2 + (vv - v) ** 2 <= r * r
+        n = int(core.sum())
+        frac = float(np.mean(cap.raw[r0:r1, c0:c1][core] >= clip)) if n else float("nan")
+        out.append(
+            {
+                "id": i + 1,
+                "u": float(u),
+                "v": float(v),
+                "core_radius_px": float(r),
+                "core_pixels": n,
+                "saturated_fraction": frac,
+            }
+        )
+    return out

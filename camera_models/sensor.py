@@ -1,0 +1,194 @@
+"""The image sensor as the EMVA 1288 linear model, with a Bayer colour filter array.
+
+For each pixel (channel c set by the CFA, full-frame parity):
+
+1. mean photo-electrons μ_e (from :mod:`camera_models.optics`) × (1 + PRNU)          [fixed pattern]
+2. + dark electrons μ_d = I_dark (1 + DSNU_I) t                                     [fixed pattern]
+3. Poisson shot noise on the sum                                                     [temporal]
+4. full well: charge above it spills partly into the 4 neighbours (blooming), the
+   rest is drained; the pixel holds at most the full well
+5. + Gaussian read noise σ_pre (e⁻, before the gain)                                 [temporal]
+6. × K (DN/e⁻, ∝ ISO or webcam analog gain) + Gaussian σ_post (DN, after the gain),
+   a share of it common to each row (row noise)                                      [temporal]
+7. + black level + offset DSNU (DN), round, clip to [0, white level]                 [ADC]
+
+Fixed-pattern noise is a property of the sensor: it comes from a counter-based hash of
+(pixel column, pixel row, the body's ``fixed_pattern_seed``), so any crop of the frame
+sees the same pattern. Temporal noise comes from ``numpy.random.Generator(PCG64(seed))``;
+the same seed gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import special
+
+from camera_models.camera import SensorModel
+
+CFA_CHANNEL = {"R": 0, "G": 1, "B": 2}
+
+
+def cfa_channels(cfa: str, x0: int, y0: int, height: int, width: int) -> NDArray[np.int8]:
+    """Channel index (0 R, 1 G, 2 B) of each pixel of a crop, from the frame's 2×2 CFA pattern.
+
+    ``cfa`` reads the 2×2 tile row by row from the frame's top-left pixel (e.g. ``RGGB``).
+    """
+    if len(cfa) != 4 or set(cfa) - set("RGB"):
+        raise ValueError(f"cfa: expected a 2x2 pattern like 'RGGB', got {cfa!r}")
+    tile = np.array([CFA_CHANNEL[ch] for ch in cfa], dtype=np.int8).reshape(2, 2)
+    rows = (np.arange(height) + y0) % 2
+    cols = (np.arange(width) + x0) % 2
+    return tile[rows[:, None], cols[None, :]]
+
+
+def _hash_uniform(x: NDArray[np.int64], y: NDArray[np.int64], seed: int, stream: int) -> NDArray[np.float64]:
+    """Deterministic uniform (0, 1) numbers per pixel: splitmix64 of (x, y, seed, stream)."""
+    with np.errstate(over="ignore"):
+        z = (
+            x.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+            ^ y.astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
+            ^ np.uint64((seed * 1000003 + stream * 7919) & 0xFFFFFFFFFFFFFFFF)
+        )
+        z = z + np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z = z ^ (z >> np.uint64(31))
+    return ((z >> np.uint64(11)).astype(np.float64) + 0.5) / float(1 << 53)
+
+
+def fixed_pattern_normal(sensor: SensorModel, x0: int, y0: int, height: int, width: int, stream: int):
+    """Standard-normal fixed-pattern values for the pixels of a crop (the same wherever the crop is)."""
+    return _fixed_pattern(sensor.fixed_pattern_seed, x0, y0, height, width, stream)
+
+
+@lru_cache(maxsize=8)
+def _fixed_pattern(seed: int, x0: int, y0: int, height: int, width: int, stream: int) -> NDArray[np.float64]:
+    y, x = np.meshgrid(
+        np.arange(y0, y0 + height, dtype=np.int64), np.arange(x0, x0 + width, dtype=np.int64), indexing="ij"
+    )
+    out = math.sqrt(2.0) * special.erfinv(2.0 * _hash_uniform(x, y, seed, stream) - 1.0)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """How the sensor is run for one frame.
+
+    Attributes
+    ----------
+    exposure_s
+        Integration time, s.
+    analog_gain
+        Gain relative to base (ISO / base ISO, or the webcam's analog gain).
+    """
+
+    exposure_s: float
+    analog_gain: float
+
+    def validate(self) -> None:
+        """Raise ValueError naming the field for impossible settings."""
+        if not isinstance(self.exposure_s, int | float) or not math.isfinite(self.exposure_s) or self.exposure_s <= 0:
+            raise ValueError(f"exposure_s: expected a time > 0 s, got {self.exposure_s!r}")
+        if not math.isfinite(self.analog_gain) or self.analog_gain <= 0:
+            raise ValueError(f"analog_gain: expected a gain > 0, got {self.analog_gain!r}")
+
+
+def bloom(electrons: NDArray[np.float64], full_well_e: float, fraction: float, passes: int = 8) -> NDArray[np.float64]:
+    """Clip charge at the full well, spilling ``fraction`` of the excess equally into the 4 neighbours.
+
+    Repeated up to ``passes`` times so spilled charge can fill and overflow neighbours
+    in turn; what does not spill goes to the anti-blooming drain. Charge spilled over the
+    crop's edge is lost.
+    """
+    e = electrons.astype(np.float64, copy=True)
+    for _ in range(passes):
+        excess = np.clip(e - full_well_e, 0.0, None)
+        if not np.any(excess):
+            break
+        e -= excess
+        share = excess * (fraction / 4.0)
+        e[1:, :] += share[:-1, :]
+        e[:-1, :] += share[1:, :]
+        e[:, 1:] += share[:, :-1]
+        e[:, :-1] += share[:, 1:]
+    return np.minimum(e, full_well_e)
+
+
+def expose(
+    mean_electrons: NDArray[np.float64],
+    sensor: SensorModel,
+    settings: SensorSettings,
+    seed: int,
+    x0: int = 0,
+    y0: int = 0,
+) -> NDArray[np.uint16]:
+    """Raw frame (DN, uint16) from the mean photo-electrons of each pixel.
+
+    Parameters
+    ----------
+    mean_electrons
+        (rows, columns) mean photo-electrons of each pixel behind its own colour filter
+        (use :func:`mosaic` to pick them from per-channel images), e⁻.
+    sensor
+        Sensor parameters.
+    settings
+        Exposure time and analog gain.
+    seed
+        Seed of the temporal noise.
+    x0, y0
+        Frame position of the crop's top-left pixel (for the fixed pattern).
+    """
+    settings.validate()
+    h, w = mean_electrons.shape
+    rng = np.random.Generator(np.random.PCG64(seed))
+    prnu = 1.0 + sensor.prnu_fraction * fixed_pattern_normal(sensor, x0, y0, h, w, stream=1)
+    dark_rate = sensor.dark_current_e_per_s * np.clip(
+        1.0 + sensor.dsnu_dark_current_fraction * fixed_pattern_normal(sensor, x0, y0, h, w, stream=2), 0.0, None
+    )
+    mu = np.clip(mean_electrons, 0.0, None) * prnu + dark_rate * settings.exposure_s
+    electrons = rng.poisson(mu).astype(np.float64)
+    electrons = bloom(electrons, sensor.full_well_e, sensor.blooming_fraction)
+    pre, post = sensor.read_noise_split()
+    electrons += rng.normal(0.0, pre, size=(h, w))
+    K = sensor.K_DN_per_e(settings.analog_gain)
+    row_sd = post * math.sqrt(sensor.row_noise_fraction)
+    pix_sd = post * math.sqrt(1.0 - sensor.row_noise_fraction)
+    dn = electrons * K + rng.normal(0.0, pix_sd, size=(h, w)) + rng.normal(0.0, row_sd, size=(h, 1))
+    dn += sensor.black_level_DN + sensor.dsnu_offset_DN * fixed_pattern_normal(sensor, x0, y0, h, w, stream=3)
+    top = min(sensor.white_level_DN, 2**sensor.adc_bits - 1)
+    return np.clip(np.rint(dn), 0, top).astype(np.uint16)
+
+
+def mosaic(rgb: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:
+    """Pick each pixel's own channel from an (rows, columns, 3) image by the CFA."""
+    ch = cfa_channels(cfa, x0, y0, rgb.shape[0], rgb.shape[1])
+    return np.take_along_axis(rgb, ch[..., None].astype(np.intp), axis=2)[..., 0]
+
+
+def clipped_normal_variance(mean: float, sd: float, clip: float) -> float:
+    """Variance of min(X, clip) for X ~ N(mean, sd²) (the signal near saturation)."""
+    a = (clip - mean) / sd
+    phi, Phi = math.exp(-0.5 * a * a) / math.sqrt(2 * math.pi), 0.5 * (1 + math.erf(a / math.sqrt(2)))
+    m1 = mean * Phi - sd * phi + clip * (1 - Phi)
+    m2 = (mean**2 + sd**2) * Phi - sd * (mean + clip) * phi + clip**2 * (1 - Phi)
+    return m2 - m1 * m1
+
+
+def emva_saturation_e(sensor: SensorModel, analog_gain: float) -> float:
+    """Saturation capacity as EMVA 1288 defines it: mean electrons where the temporal variance peaks.
+
+    The output clips at ``sensor.saturation_e``; with shot and read noise the variance of
+    the clipped signal peaks a little below that. Found from the model analytically
+    (Gaussian approximation of the Poisson signal), independent of any simulation.
+    """
+    clip = sensor.saturation_e(analog_gain)
+    read = sensor.read_noise_e(analog_gain)
+    means = np.linspace(0.5 * clip, 1.2 * clip, 14001)
+    var = [clipped_normal_variance(m, math.sqrt(m + read**2), clip) for m in means]
+    return float(means[int(np.argmax(var))])
