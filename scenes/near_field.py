@@ -41,13 +41,14 @@ from scenes.render_cache import RenderCache, content_key
 
 log = logging.getLogger("beacon_sim")
 
-NEAR_FIELD_VERSION = 1
+NEAR_FIELD_VERSION = 2
 LED_DEPTH_M = 6.0e-3
 """Front of the LED lens behind the face: room for 5 sheets (0.5 mm), 5 mm foam, 0.5 mm air."""
 FOAM_TOP_M = -0.5e-3
 SHEET_PITCH_M = 1.0e-4
 CLEARANCE_M = 5.0e-5
-"""Diffusers are this much narrower than the housing bore so their edges never coincide with it."""
+"""The foam is this much narrower than the housing bore so its boundary (a medium
+interface) never coincides with the wall."""
 LED_BODY_REFLECTANCE = 0.5
 """Assumed diffuse reflectance of the LED's epoxy body and lead frame seen from the front."""
 
@@ -178,7 +179,8 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
     if config.paper_sheets:
         r1, t1 = paper(config.paper_colour_for(side)).at(lam_ref)
         for k in range(config.paper_sheets):
-            shapes.append(disk_shape(np.array([0.0, 0.0, -k * SHEET_PITCH_M]), up, r_in, "sheet"))
+            # sheets fill the bore (their edges meet the wall; no gap for light to bypass them)
+            shapes.append(disk_shape(np.array([0.0, 0.0, -k * SHEET_PITCH_M]), up, r_face, "sheet"))
     else:
         r1 = t1 = 0.0
     medium = None
