@@ -101,15 +101,19 @@ class Pose:
 
     def attitude_rad(self) -> tuple[float, float, float]:
         """Camera yaw, pitch, roll in the target frame (B in F, Z-Y-X), rad; 0 facing squarely."""
-        return euler_zyx(F_FROM_T @ self.cv_from_t.T @ B_FROM_CV.T)
+        return euler_zyx(self.attitude_matrix())
 
     def t_from_cv(self) -> NDArray[np.float64]:
         """4×4 transform from the camera frame to the target frame (the study's T2)."""
         return invert(homogeneous(self.cv_from_t, self.t_cv_m))
 
+    def attitude_matrix(self) -> NDArray[np.float64]:
+        """Rotation of the camera body frame B in the facing frame F (identity facing squarely)."""
+        return F_FROM_T @ self.cv_from_t.T @ B_FROM_CV.T
+
     def quaternion_wxyz(self) -> tuple[float, float, float, float]:
-        """Unit quaternion (w, x, y, z) of the camera's attitude in the target frame (T from cv), w ≥ 0."""
-        x, y, z, w = Rotation.from_matrix(self.cv_from_t.T).as_quat()
+        """Unit quaternion (w, x, y, z) of :meth:`attitude_matrix` (Hamilton, active), w ≥ 0."""
+        x, y, z, w = Rotation.from_matrix(self.attitude_matrix()).as_quat()
         sign = 1.0 if w >= 0 else -1.0
         return (sign * w, sign * x, sign * y, sign * z)
 

@@ -154,24 +154,28 @@ class _Fit:
     blobs: list[Blob] = field(default_factory=list)
 
 
-def _prepare(image, s: TrackerSettings) -> tuple[NDArray | None, str | None]:
-    bgr, reason = as_bgr(image)
-    if bgr is None:
-        return None, reason
-    was_8bit = bgr.dtype == np.uint8
-    f = to_float(bgr)
-    if was_8bit and s.linearise_8bit:
-        f = srgb_to_linear(f)
-    return f, None
+def _linear_lut(dtype, s: TrackerSettings) -> NDArray[np.float32] | None:
+    if dtype == np.uint8:
+        lut = np.arange(256, dtype=np.float32) / 255.0
+        return srgb_to_linear(lut) if s.linearise_8bit else lut
+    if dtype == np.uint16:
+        return np.arange(65536, dtype=np.float32) / 65535.0
+    return None
+
+
+def _to_linear(arr: NDArray, lut: NDArray[np.float32] | None) -> NDArray[np.float32]:
+    # integer images go through a look-up table: cheap on an 18-Mpx frame
+    return lut[arr] if lut is not None else to_float(arr)
 
 
 def find_blobs(image, settings: TrackerSettings | None = None, crop_origin_px=(0, 0)) -> tuple[list[Blob], str | None]:
     """Bright blobs with sub-pixel centroids, saturation and colour (steps 1–3), or a reason for none."""
     s = settings or TrackerSettings()
-    f, reason = _prepare(image, s)
-    if f is None:
+    bgr, reason = as_bgr(image)
+    if bgr is None:
         return [], reason
-    y = f.max(axis=2)
+    lut = _linear_lut(bgr.dtype, s)
+    y = _to_linear(bgr.max(axis=2), lut)  # max commutes with the monotonic decoding
     step = max(1, int(np.sqrt(y.size / 250_000)))  # a subsample is enough for the statistics
     sub = y[::step, ::step]
     bg = float(np.median(sub))
@@ -184,7 +188,7 @@ def find_blobs(image, settings: TrackerSettings | None = None, crop_origin_px=(0
     if n <= 1:
         return [], f"no bright blobs above the threshold {thr:.3g} (background {bg:.3g}, full scale 1)"
     order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[: s.max_blobs]
-    chan_bg = np.median(f[::step, ::step].reshape(-1, 3), axis=0)
+    chan_bg = np.median(_to_linear(bgr[::step, ::step], lut).reshape(-1, 3), axis=0)
     model = s.model()
     blobs = []
     h, w = y.shape
@@ -200,7 +204,7 @@ def find_blobs(image, settings: TrackerSettings | None = None, crop_origin_px=(0
             continue
         vv, uu = np.mgrid[ya:yb, xa:xb]
         cu, cv_ = float((wy * uu).sum() / total), float((wy * vv).sum() / total)
-        pix = f[ya:yb, xa:xb]
+        pix = _to_linear(bgr[ya:yb, xa:xb], lut)
         clipped = np.any(pix >= s.saturation_level, axis=2)
         region = cv2.dilate(lab_win.astype(np.uint8), kernel) > 0
         use = region & ~clipped & (y[ya:yb, xa:xb] > bg + 0.5 * (thr - bg))
