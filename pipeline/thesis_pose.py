@@ -188,13 +188,30 @@ def thesis_pose_from_vectors(
     converged = (bool(rng.converged[0, 0]), bool(rng.converged[0, 1]))
     if not np.all(np.isfinite(ranges)) or ranges[0] <= 0:
         return ThesisPoseResult(None, None, ranges, converged, "inverse perspective: no finite positive range")
-    w = measured_vectors(r, ranges)
-    v = reference_vectors_s(design)
-    q = quest(w, v, weights).q_xyzw if full_quest else quest_shortcut(w, v, weights)
-    if not np.all(np.isfinite(w)) or not np.all(np.isfinite(q)):
+    q = _attitude(r, ranges, design, weights, full_quest)
+    if q is None:
         return ThesisPoseResult(None, None, ranges, converged, "QUEST: no finite attitude")
     msg = BotPositionQuat(float(ranges[0]), tuple(q), tuple(r[0]))
     return ThesisPoseResult(msg, pose_from_study(q, ranges[0], r[0]), ranges, converged, None)
+
+
+def _attitude(r, ranges, design, weights, full_quest) -> NDArray[np.float64] | None:
+    with np.errstate(all="ignore"):
+        w = measured_vectors(r, ranges)
+    if not np.all(np.isfinite(w)):
+        return None
+    v = reference_vectors_s(design)
+    q = quest(w, v, weights).q_xyzw if full_quest else quest_shortcut(w, v, weights)
+    return q if np.all(np.isfinite(q)) else None
+
+
+def attitude_and_pose(r_cs, ranges_m, design: BeaconDesign, weights=STUDY_WEIGHTS, full_quest=False) -> Pose | None:
+    """Step 2 alone: QUEST on given ranges (from a batched :func:`thesis_ranges`) → our Pose, or None."""
+    r = np.asarray(r_cs, dtype=np.float64).reshape(5, 3)
+    if not np.all(np.isfinite(ranges_m)) or ranges_m[0] <= 0:
+        return None
+    q = _attitude(r, ranges_m, design, weights, full_quest)
+    return None if q is None else pose_from_study(q, ranges_m[0], r[0])
 
 
 def thesis_pose(points: LEDPoints, design: BeaconDesign, start: str = "study") -> ThesisPoseResult:

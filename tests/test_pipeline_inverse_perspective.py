@@ -57,7 +57,8 @@ def test_study_start_failures_counted_and_reported():
     for yaw in (0.0, 30.0):
         rr, tt = _exact_rays(design, np.array([1.0, 5.0, 10.0]), np.radians(yaw))
         one = thesis_ranges(rr, design, start="study")
-        print(f"  yaw {yaw:4.1f} deg: R1 per triad {np.round(one.r1_triads_m, 6).tolist()}, iterations {one.iterations.tolist()}")
+        r1 = np.round(one.r1_triads_m, 6).tolist()
+        print(f"  yaw {yaw:4.1f} deg: R1 per triad {r1}, iterations {one.iterations.tolist()}")
         assert np.allclose(one.r1_triads_m, tt[:, :1], rtol=1e-9)
 
     rng = np.random.default_rng(12)
@@ -66,8 +67,10 @@ def test_study_start_failures_counted_and_reported():
     res = thesis_ranges(r, design, start="study")
     negative = res.r1_triads_m[:, 0] < 0
     wrong = np.abs(res.ranges_m[:, 0] / true[:, 0] - 1.0) > 1e-6
-    print(f"  yaw 60-85 deg: {wrong.sum()} of 4000 wrong, {negative.sum()} with the horizontal triad's R1 < 0; "
-          f"smallest failing yaw {np.degrees(yaws[wrong].min()):.1f} deg")
+    print(
+        f"  yaw 60-85 deg: {wrong.sum()} of 4000 wrong, {negative.sum()} with the horizontal triad's R1 < 0; "
+        f"smallest failing yaw {np.degrees(yaws[wrong].min()):.1f} deg"
+    )
     assert negative.sum() > 0 and np.all(negative <= wrong)
     assert np.degrees(yaws[wrong].min()) > 70.0
     geo = thesis_ranges(r, design, start="geometric")
