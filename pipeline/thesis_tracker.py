@@ -144,8 +144,8 @@ def thesis_track(
             counts[colour] = 0
             continue
         mask = colour_mask(hsv, boxes, s)
-        keypoints = detector.detect(255 - mask) if mask.any() else []
-        uv = np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2)
+        keypoints, pad = _detect(detector, mask, s.max_area)
+        uv = np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2) - pad
         uf, vf = full_pixel(uv[:, 0], uv[:, 1], scale)
         blobs = [
             Blob(float(a) + u0, float(b) + v0, float(np.pi * (k.size / 2) ** 2), colour)
@@ -158,6 +158,23 @@ def thesis_track(
             return _numbered(colour, full, intrinsics, scale, all_blobs)
     summary = ", ".join(f"{c}: {n}" for c, n in counts.items())
     return TrackResult(None, None, f"no colour with exactly 5 blobs ({summary})", all_blobs)
+
+
+def _detect(detector, mask: NDArray[np.uint8], max_area: float):
+    """SimpleBlobDetector on the inverted mask, padded so its background exceeds ``max_area``.
+
+    In a full frame the background (one huge "blob" of the inverted mask) is far larger
+    than maxArea and is filtered out; in a small crop it is not, and it displaces a
+    marker's keypoint. Padding the crop with background restores the full-frame result.
+    """
+    if not mask.any():
+        return [], 0
+    h, w = mask.shape
+    pad = 0
+    while (h + 2 * pad) * (w + 2 * pad) <= 2 * max_area:
+        pad += 64
+    inv = cv2.copyMakeBorder(255 - mask, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255) if pad else 255 - mask
+    return detector.detect(inv), pad
 
 
 def _numbered(colour, full_uv, intrinsics: Intrinsics, scale: float, blobs) -> TrackResult:
