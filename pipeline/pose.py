@@ -78,10 +78,14 @@ def pnp_pose(uv, design: BeaconDesign, intrinsics: Intrinsics, sigma_px: float =
     uv = _check_uv(uv)
     obj = design.marker_positions_m()
     k = intrinsics.matrix()
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
+        if ok:
+            rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec, criteria=_LM_CRITERIA)
+    except cv2.error:  # SQPnP asserts on degenerate (near-coincident) points
+        ok = False
     if not ok:
-        raise ValueError("markers: SQPnP found no pose")
-    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec, criteria=_LM_CRITERIA)
+        raise ValueError("markers: SQPnP found no pose (degenerate marker positions)")
     pose = Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3))
     return _estimate(pose, uv, obj, intrinsics, sigma_px, "sqpnp+lm")
 

@@ -248,10 +248,13 @@ def _plausible(pts: NDArray[np.float64]) -> bool:
 
 def _fit(uv: NDArray[np.float64], design: BeaconDesign, k: NDArray[np.float64]) -> float:
     obj = design.marker_positions_m()
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
-    if not ok:
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
+        if not ok:
+            return float("inf")
+        rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec)
+    except cv2.error:  # degenerate point sets (SQPnP asserts on near-coincident points)
         return float("inf")
-    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec)
     rot = cv2.Rodrigues(rvec)[0]
     cam_t = -rot.T @ tvec.reshape(3)
     if tvec[2, 0] <= 0 or cam_t[0] <= 0:  # target behind the camera, or seen from behind
