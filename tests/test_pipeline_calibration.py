@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -24,29 +25,37 @@ K_TRUE = np.array([[610.0, 0.0, 322.5], [0.0, 605.0, 236.0], [0.0, 0.0, 1.0]])
 D_TRUE = np.array([-0.21, 0.06, 0.0005, -0.0004, 0.0])
 
 
-def _render_board(rvec, tvec, supersample=2):
-    """Image of the 8 × 6 inner-corner board seen by (K_TRUE, D_TRUE): ray-cast every sub-pixel."""
+@lru_cache(maxsize=4)
+def _pixel_rays(supersample: int) -> list[np.ndarray]:
+    """Normalised, undistorted ray directions of every sub-pixel (the same for every view)."""
     w, h = SIZE
     offs = (np.arange(supersample) + 0.5) / supersample - 0.5
     uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rot = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))[0]
-    t = np.asarray(tvec, dtype=np.float64)
-    acc = np.zeros((h, w))
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+    rays = []
     for ou in offs:
         for ov in offs:
             pix = np.stack([(uu + ou).ravel(), (vv + ov).ravel()], 1).reshape(-1, 1, 2)
-            crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
             xn = cv2.undistortPoints(pix, K_TRUE, D_TRUE, criteria=crit).reshape(-1, 2)
-            d = np.column_stack([xn, np.ones(len(xn))])
-            # ray λ d meets the board plane z_b = 0: (Rᵀ(λ d − t))_z = 0
-            lam = (rot.T @ t)[2] / (d @ rot[:, 2])
-            pb = (lam[:, None] * d - t) @ rot  # = Rᵀ(λ d − t)
-            sx, sy = pb[:, 0] / SQUARE_M, pb[:, 1] / SQUARE_M
-            on_board = (sx > -1) & (sx < 8) & (sy > -1) & (sy < 6)
-            black = on_board & ((np.floor(sx).astype(int) + np.floor(sy).astype(int)) % 2 == 0)
-            border = (sx > -2) & (sx < 9) & (sy > -2) & (sy < 7)
-            val = np.where(black, 0.05, np.where(border, 0.95, 0.4))
-            acc += val.reshape(h, w)
+            rays.append(np.column_stack([xn, np.ones(len(xn))]))
+    return rays
+
+
+def _render_board(rvec, tvec, supersample=2):
+    """Image of the 8 × 6 inner-corner board seen by (K_TRUE, D_TRUE): ray-cast every sub-pixel."""
+    w, h = SIZE
+    rot = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))[0]
+    t = np.asarray(tvec, dtype=np.float64)
+    acc = np.zeros((h, w))
+    for d in _pixel_rays(supersample):
+        # ray λ d meets the board plane z_b = 0: (Rᵀ(λ d − t))_z = 0
+        lam = (rot.T @ t)[2] / (d @ rot[:, 2])
+        pb = (lam[:, None] * d - t) @ rot  # = Rᵀ(λ d − t)
+        sx, sy = pb[:, 0] / SQUARE_M, pb[:, 1] / SQUARE_M
+        on_board = (sx > -1) & (sx < 8) & (sy > -1) & (sy < 6)
+        black = on_board & ((np.floor(sx).astype(int) + np.floor(sy).astype(int)) % 2 == 0)
+        border = (sx > -2) & (sx < 9) & (sy > -2) & (sy < 7)
+        acc += np.where(black, 0.05, np.where(border, 0.95, 0.4)).reshape(h, w)
     img = np.round(acc / supersample**2 * 255).astype(np.uint8)
     return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
 
@@ -54,11 +63,11 @@ def _render_board(rvec, tvec, supersample=2):
 def _views():
     rng = np.random.default_rng(3)
     views = []
-    for k in range(9):
+    for k in range(12):
         rvec = np.array([rng.uniform(-0.45, 0.45), rng.uniform(-0.45, 0.45), rng.uniform(-0.2, 0.2)])
         centre = np.array([3.5, 2.5, 0.0]) * SQUARE_M
         rot = cv2.Rodrigues(rvec)[0]
-        target = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.06, 0.06), 0.42 + 0.025 * k])
+        target = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.06, 0.06), 0.42 + 0.02 * k])
         tvec = target - rot @ centre  # board centre lands at target
         views.append((rvec, tvec))
     return views
