@@ -136,3 +136,37 @@ def test_too_few_views_and_bad_files(tmp_path):
         load_calibration(bad)
     with pytest.raises(ValueError, match=r"^calibration:"):
         load_calibration(tmp_path / "missing.json")
+
+
+def test_detect_with_a_calibration_undoes_lens_distortion():
+    """Markers drawn where a distorting lens puts them: with the calibration the pose is right."""
+    from camera_models.geometry import camera_geometry
+    from pipeline.detect import detect
+    from pipeline.frames import pose_from_scenario
+    from pipeline.synthetic import draw_markers
+    from scenes.scenario import Scenario
+
+    camera = "logitech-c270"
+    g = camera_geometry(camera)
+    k = g.intrinsics()
+    dist = np.array([-0.25, 0.08, 0.0, 0.0, 0.0])
+    cal = Calibration(k, dist, g.width_px, g.height_px, 0.0, 0)
+    sc = Scenario(camera=camera, range_m=2.0, yaw_deg=15.0)
+    pose = pose_from_scenario(sc)
+    # turn the camera about its centre so the target images near the top-right corner
+    turn = cv2.Rodrigues(np.array([np.radians(9.0), np.radians(20.0), 0.0]))[0]
+    rvec = cv2.Rodrigues(turn @ pose.cv_from_t)[0]
+    tvec = turn @ pose.t_cv_m
+    uv, _ = cv2.projectPoints(sc.design.marker_positions_m(), rvec, tvec, k, dist)
+    uv = uv.reshape(-1, 2)
+    assert uv[:, 0].max() > 1000 and uv[:, 1].min() < 200  # far off-centre, where distortion is large
+    img = draw_markers((g.height_px, g.width_px), uv, (0.03, 0.06, 1.0), 1.5, peak=0.9)
+    for alpha in (0.0, 1.0):
+        out = detect(img, camera, calibration=cal, alpha=alpha).to_dict()
+        assert out["side"] == "red", out["reason"]
+        got = np.array([[m["u"], m["v"]] for m in out["markers"]])
+        assert np.abs(got - uv).max() < 0.15  # reported in the original (distorted) image
+        assert abs(out["range_m"] - 2.0) < 0.004
+    plain = detect(img, camera).to_dict()
+    print(f"\nrange error with calibration {out['range_m'] - 2.0:+.5f} m, without {plain['range_m'] - 2.0:+.5f} m")
+    assert abs(plain["range_m"] - 2.0) > 5 * abs(out["range_m"] - 2.0)
