@@ -10,10 +10,11 @@ plane), 2 the viewer's right, 3 the viewer's left, 4 top, 5 bottom.
   table requires. The rule breaks when the camera rolls by more than about the angle
   between marker 1 and the 2–3 line seen from 4 or 5, or when yaw pushes marker 1
   past marker 2 or 3 in azimuth.
-* :func:`number_cross` is the project's rule: the four outer markers are the two
+* :func:`cross_candidates` is the project's rule: the four outer markers are the two
   diagonals of a convex quadrilateral (the arms 2–3 and 4–5), the fifth point is 1; the
   more horizontal diagonal is 2–3 (2 on the right), the other 4–5 (4 on top). It holds
-  for any roll below 45° and needs no ordering by azimuth.
+  for any roll below 45° and needs no ordering by azimuth; the better tracker picks among
+  the candidates by fitting the target geometry.
 """
 
 from __future__ import annotations
@@ -139,27 +140,8 @@ def cross_candidates(uv) -> list[NDArray[np.int64]]:
     return out
 
 
-def number_cross(uv) -> NDArray[np.int64] | None:
-    """The project's numbering: the point inside the quadrilateral of the other four is 1."""
-    pts = np.asarray(uv, dtype=np.float64)
-    for cand in cross_candidates(pts):
-        quad = pts[cand[[1, 4, 2, 3]]]  # 2, 5, 3, 4 go round the quadrilateral
-        if _inside(pts[cand[0]], quad):
-            return cand
-    return None
-
-
 def _segments_cross(a, b, c, d) -> bool:
     def orient(p, q, r):
         return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
 
     return orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0
-
-
-def _inside(p, quad) -> bool:
-    signs = []
-    for k in range(4):
-        a, b = quad[k], quad[(k + 1) % 4]
-        signs.append((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]))
-    signs = np.array(signs)
-    return bool(np.all(signs > 0) or np.all(signs < 0))

@@ -21,6 +21,9 @@ Weaknesses kept and documented:
   saturated cores of bright LEDs of any colour whose hue is 81–180, not red light; the
   blue range shares hues 84–180 with it.
 * One wrong blob count in a colour (a reflection, a merged pair) loses the side.
+* OpenCV 5 refuses a filter minimum of exactly 0: 1e-9 is used (the same blobs pass).
+* Crops (not the study's full frames) are padded with background before blob detection,
+  so the background region, as in a full frame, exceeds maxArea and is filtered out.
 * The HSV ranges came from hand tuning on close-range images; :func:`derive_hsv_ranges`
   is that procedure made repeatable.
 """
