@@ -7,9 +7,9 @@ plane), 2 the viewer's right, 3 the viewer's left, 4 top, 5 bottom.
   lowest is 5, the other three by increasing azimuth (positive left) are 2, 1, 3. The
   study calls 4 the "greatest elevation" while its elevation is positive *downward*;
   the project reads "highest" as top of the image (least elevation), as its marker
-  table requires. The rule breaks when the camera rolls by more than about the angle
-  between marker 1 and the 2–3 line seen from 4 or 5, or when yaw pushes marker 1
-  past marker 2 or 3 in azimuth.
+  table requires. The rule breaks when yaw pushes marker 1 past marker 2 or 3 in
+  azimuth (V2: yaw > atan(70/46) = 56.7°) and, like any up/down rule, at about 45° of
+  camera roll.
 * :func:`cross_candidates` is the project's rule: the four outer markers are the two
   diagonals of a convex quadrilateral (the arms 2–3 and 4–5), the fifth point is 1; the
   more horizontal diagonal is 2–3 (2 on the right), the other 4–5 (4 on top). It holds

@@ -221,3 +221,21 @@ def test_derived_red_range_wraps_around_hue_zero():
     assert len(boxes) == 2
     assert {b[0][0] for b in boxes} == {0} | {min(b[0][0] for b in boxes if b[0][0] > 0)}
     assert any(lo[0] <= 176 <= hi[0] for lo, hi in boxes) and any(lo[0] <= 2 <= hi[0] for lo, hi in boxes)
+
+
+@pytest.mark.parametrize("yaw_deg", [30.0, 56.0, 58.0, 75.0])
+def test_numbering_rules_at_large_yaw(yaw_deg):
+    """The study's rule (4 highest, 5 lowest, then 2, 1, 3 by azimuth) breaks once marker 1
+    passes marker 3 in azimuth, at yaw = atan(70/46) = 56.7° for V2; the cross rule keeps
+    the true numbering among its candidates (the better tracker then picks it by fit).
+    """
+    from pipeline.angles import pinhole_angles
+    from pipeline.markers import cross_candidates, number_study
+
+    camera = "canon-t6-18mm"
+    intr = Intrinsics.from_geometry(camera_geometry(camera))
+    uv, _ = marker_pixels(camera, 3.0, yaw_deg)
+    az, el = pinhole_angles(uv[:, 0], uv[:, 1], intr)
+    study_ok = bool(np.array_equal(number_study(az, el), np.arange(5)))
+    assert study_ok == (yaw_deg < np.degrees(np.arctan(70 / 46)))
+    assert any(np.array_equal(cand, np.arange(5)) for cand in cross_candidates(uv))
