@@ -1,0 +1,244 @@
+"""One image in, one answer out: tracker → angles → pose → global frame.
+
+:func:`detect` runs either tracker (``thesis``: :mod:`pipeline.thesis_tracker`; ``best``:
+:mod:`pipeline.tracker`) and either estimator (``thesis``: :mod:`pipeline.thesis_pose`;
+``best``: :func:`pipeline.pose.pnp_pose`) on a BGR image, optionally undistorted with a
+calibration first, and returns a :class:`Detection` whose :meth:`Detection.to_dict` is
+the CLI's JSON. It never raises on image content: an image it cannot use gives "no
+target" with a reason. Bad arguments (camera name, tracker name, alpha) raise
+``ValueError`` naming the field.
+
+Pixel coordinates reported are full-frame, full-resolution pixels of the image as given
+(distorted, when a calibration was used: the undistorted centroids are mapped back).
+Angles are the tracker's: the study's formula for the study's tracker, the pinhole
+(undistorted) angles for the better tracker.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from numpy.typing import NDArray
+
+from camera_models.geometry import camera_geometry
+from pipeline.angles import Intrinsics, pinhole_angles, study_angles, study_unit_vectors
+from pipeline.calibration import Calibration, distort_points, new_camera_matrix, undistort
+from pipeline.frames import Pose, global_pose
+from pipeline.image_io import as_bgr
+from pipeline.markers import TrackResult
+from pipeline.messages import LEDPoints
+from pipeline.pose import pnp_pose
+from pipeline.thesis_pose import thesis_pose_from_vectors
+from pipeline.thesis_tracker import ThesisTrackerSettings, thesis_track
+from pipeline.tracker import TrackerSettings, track
+from scenes.beacon import beacon_design
+
+TRACKERS = ("thesis", "best")
+ESTIMATORS = ("thesis", "best")
+
+
+@dataclass
+class Detection:
+    """Everything :func:`detect` found.
+
+    Attributes
+    ----------
+    side
+        Side colour, or None.
+    reason
+        Why there is no target or no pose; None when all went well.
+    markers
+        Markers 1..5: id, u, v (px), azimuth_rad, elevation_rad.
+    pose
+        Camera pose relative to the target, or None.
+    global_pose
+        Pose in the beacon frame (dict), or None.
+    tracker, estimator
+        Which were used.
+    notes
+        Extra findings (ignored blobs, colour doubts, Newton failures).
+    led_points
+        The study's LEDPoints message when the side and angles are known.
+    sigma
+        1-σ uncertainties of the best estimator (range_m, attitude_deg, lateral_m), or {}.
+    """
+
+    side: str | None
+    reason: str | None
+    markers: list[dict] = field(default_factory=list)
+    pose: Pose | None = None
+    global_pose: dict | None = None
+    tracker: str = "best"
+    estimator: str = "best"
+    notes: list[str] = field(default_factory=list)
+    led_points: LEDPoints | None = None
+    sigma: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """The CLI's JSON fields."""
+        out = {"side": self.side, "reason": self.reason, "tracker": self.tracker, "estimator": self.estimator}
+        out["markers"] = self.markers
+        if self.pose is not None:
+            yaw, pitch, roll = (math.degrees(a) for a in self.pose.attitude_rad())
+            out |= {
+                "range_m": self.pose.range_m,
+                "quaternion_wxyz": list(self.pose.quaternion_wxyz()),
+                "yaw_deg": yaw,
+                "pitch_deg": pitch,
+                "roll_deg": roll,
+            }
+        else:
+            out |= dict.fromkeys(("range_m", "quaternion_wxyz", "yaw_deg", "pitch_deg", "roll_deg"))
+        out["global"] = self.global_pose
+        out["sigma"] = self.sigma
+        out["notes"] = self.notes
+        return out
+
+
+def _check_choice(name: str, value: str, allowed) -> None:
+    if value not in allowed:
+        raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {value!r}")
+
+
+def detect(
+    image,
+    camera: str,
+    tracker: str = "best",
+    estimator: str = "best",
+    beacon: str = "v2",
+    calibration: Calibration | None = None,
+    alpha: float = 0.0,
+    crop_origin_px: tuple[int, int] | None = None,
+    ring_camera: int | None = None,
+    sigma_px: float = 0.3,
+    tracker_settings: TrackerSettings | None = None,
+    thesis_settings: ThesisTrackerSettings | None = None,
+) -> Detection:
+    """Detect the beacon side in ``image`` and estimate the camera pose.
+
+    Parameters
+    ----------
+    image
+        BGR image (uint8/uint16/float, grey accepted): the camera's full frame, or a crop
+        of it whose top-left pixel is ``crop_origin_px``.
+    camera
+        Camera name (``camera_models``), for the frame size and intrinsics.
+    tracker, estimator
+        ``thesis`` (the study's) or ``best``.
+    beacon
+        ``v1`` or ``v2``.
+    calibration
+        Undistort with this calibration first (its size must be the camera's frame).
+    alpha
+        ``getOptimalNewCameraMatrix`` alpha for the undistortion (0 or 1 in the study).
+    crop_origin_px
+        Full-frame pixel of the image's top-left pixel; None means the image is the full frame.
+    ring_camera
+        Camera number on the study's 6-camera ring: the global pose is then the robot's;
+        None reports the camera's own pose.
+    sigma_px
+        Centroid noise assumed for the best estimator's covariance, px.
+    tracker_settings, thesis_settings
+        Tracker parameters (the beacon of ``tracker_settings`` is overridden by ``beacon``).
+    """
+    _check_choice("tracker", tracker, TRACKERS)
+    _check_choice("estimator", estimator, ESTIMATORS)
+    geometry = camera_geometry(camera)
+    design = beacon_design(beacon)
+    intr = Intrinsics.from_geometry(geometry)
+    result = Detection(None, None, tracker=tracker, estimator=estimator)
+    if calibration is not None:
+        new_camera_matrix(calibration, alpha)  # validates alpha
+        if (calibration.width_px, calibration.height_px) != (geometry.width_px, geometry.height_px):
+            raise ValueError(
+                f"calibration: made for {calibration.width_px}×{calibration.height_px} px, "
+                f"camera {camera} is {geometry.width_px}×{geometry.height_px} px"
+            )
+    bgr, reason = as_bgr(image)
+    if bgr is None:
+        result.reason = reason
+        return result
+    h, w = bgr.shape[:2]
+    origin, reason = _origin(w, h, geometry, crop_origin_px)
+    if reason:
+        result.reason = reason
+        return result
+    new_k = None
+    if calibration is not None:
+        bgr, intr = undistort(bgr, calibration, alpha, origin)
+        new_k = intr.matrix()
+    if tracker == "thesis":
+        tr = thesis_track(bgr, intr, thesis_settings, origin)
+    else:
+        settings = tracker_settings or TrackerSettings()
+        if settings.beacon != beacon:
+            settings = TrackerSettings(**{**settings.__dict__, "beacon": beacon})
+        tr = track(bgr, intr, settings, origin)
+    result.side, result.notes = tr.side, list(tr.notes)
+    if not tr.found:
+        result.reason = tr.reason
+        return result
+    result.reason = tr.reason
+    az, el = _angles(tr, intr)
+    shown = tr.uv if calibration is None else distort_points(tr.uv, calibration, new_k)
+    result.markers = [
+        {"id": i + 1, "u": float(shown[i, 0]), "v": float(shown[i, 1]), "azimuth_rad": float(az[i]),
+         "elevation_rad": float(el[i])}
+        for i in range(5)
+    ]  # fmt: skip
+    if tr.side is not None:
+        result.led_points = LEDPoints(ring_camera or 0, tr.side, tuple(az), tuple(el))
+    if estimator == "thesis":
+        if tr.azimuth_rad is not None:
+            s_az, s_el = tr.azimuth_rad, tr.elevation_rad
+        else:  # the study's formula on full-resolution, full-frame pixels
+            s_az, s_el = study_angles(tr.uv[:, 0], tr.uv[:, 1], (intr.width_px, intr.height_px), intr)
+        est = thesis_pose_from_vectors(study_unit_vectors(s_az, s_el), design)
+        if not all(est.converged):
+            result.notes.append(f"Newton did not converge (triads converged: {list(est.converged)})")
+        if est.pose is None:
+            result.reason = est.reason
+            return result
+        result.pose = est.pose
+    else:
+        try:
+            est = pnp_pose(tr.uv, design, intr, sigma_px)
+        except ValueError as exc:
+            result.reason = str(exc)
+            return result
+        result.pose = est.pose
+        result.sigma = {
+            "range_m": est.bound.range_m,
+            "attitude_deg": math.degrees(est.bound.attitude_rad),
+            "lateral_m": est.bound.lateral_m,
+            "reprojection_rms_px": est.reprojection_rms_px,
+        }
+    if tr.side is not None:
+        g = global_pose(tr.side, result.pose, design.d_t_m, ring_camera)
+        result.global_pose = {
+            "x_m": g.x_m, "y_m": g.y_m, "z_m": g.z_m,
+            "yaw_deg": math.degrees(g.yaw_rad), "pitch_deg": math.degrees(g.pitch_rad),
+            "roll_deg": math.degrees(g.roll_rad),
+        }  # fmt: skip
+    return result
+
+
+def _origin(w: int, h: int, geometry, crop_origin_px) -> tuple[tuple[int, int], str | None]:
+    fw, fh = geometry.width_px, geometry.height_px
+    if crop_origin_px is None:
+        if (w, h) != (fw, fh):
+            return (0, 0), (
+                f"image: {w}×{h} px is not {geometry.name}'s {fw}×{fh} px frame (give the crop origin for a crop)"
+            )
+        return (0, 0), None
+    u0, v0 = (int(c) for c in crop_origin_px)
+    if u0 < 0 or v0 < 0 or u0 + w > fw or v0 + h > fh:
+        return (u0, v0), f"image: a {w}×{h} px crop at ({u0}, {v0}) does not fit in the {fw}×{fh} px frame"
+    return (u0, v0), None
+
+
+def _angles(tr: TrackResult, intr: Intrinsics) -> tuple[NDArray, NDArray]:
+    if tr.azimuth_rad is not None:
+        return tr.azimuth_rad, tr.elevation_rad
+    return pinhole_angles(tr.uv[:, 0], tr.uv[:, 1], intr)
