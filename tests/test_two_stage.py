@@ -33,7 +33,7 @@ def test_two_stage_matches_brute_force_tightly(tmp_path, view_deg):
     c = compare(
         MarkerView(view_deg=view_deg),
         brute_spp=4096,
-        brute_passes=128,
+        brute_passes=256,
         near=NearFieldSettings(spp=1024),
         cache=RenderCache(tmp_path),
     )
