@@ -37,5 +37,5 @@ def test_two_stage_matches_brute_force_tightly(tmp_path, view_deg):
         near=NearFieldSettings(spp=1024),
         cache=RenderCache(tmp_path),
     )
-    assert c.flux_brute_force_se < 0.04 * c.flux_brute_force
+    assert c.flux_brute_force_se < 0.05 * c.flux_brute_force  # enough power to see a 15 % disagreement
     _check(c)

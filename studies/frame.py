@@ -1,0 +1,155 @@
+"""One simulated frame, end to end: render → camera → saved JPEG → detectors → result rows.
+
+A *frame task* is a plain dict (JSON-able, so it can be hashed, stored and sent to a
+worker process or a Dask cluster):
+
+``scenario``   keyword arguments of :class:`scenes.scenario.Scenario` (without ``render``)
+``render``     keyword arguments of :class:`scenes.scenario.RenderSettings`
+``seed``       sensor-noise seed
+``exposure``   optional manual settings ``{"iso": .., "exposure_s": ..}`` (else the camera's)
+``trackers``, ``estimators``  which detectors to run (default both of each)
+
+:func:`simulate_frame` returns one row per tracker × estimator with the task's
+parameters, the camera's exposure, ground truth, detection and pose results, and the
+marker measurements that do not depend on the detector (core saturation, colour).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+FRAME_VERSION = 1
+"""Bump when a change alters the rows a task produces (invalidates stored results)."""
+
+TRACKERS = ("thesis", "best")
+ESTIMATORS = ("thesis", "best")
+
+
+def frame_scenario(task: dict):
+    """The :class:`Scenario` of a task (validates it)."""
+    from scenes.scenario import RenderSettings, Scenario
+
+    return Scenario(**task["scenario"], render=RenderSettings(**task.get("render", {})))
+
+
+def simulate_frame(task: dict) -> list[dict]:
+    """Simulate one frame task (see module docstring) and score every detector on it."""
+    import cv2
+
+    from camera_models.camera import load_camera
+    from camera_models.capture import capture, marker_core_saturation, marker_pixels
+    from camera_models.exposure import manual_exposure
+    from pipeline.evaluate import evaluate_detection
+    from scenes.background import render_background
+    from scenes.render import render
+    from scenes.render_cache import RenderCache
+
+    scenario = frame_scenario(task)
+    cache = RenderCache()
+    camera = load_camera(scenario.camera)
+    radiance = render(scenario, cache)
+    needs_background = camera.exposure.mode == "auto" or scenario.env.has_ambient
+    background = render_background(scenario, cache) if needs_background else None
+    exposure = None
+    if task.get("exposure"):
+        exposure = manual_exposure(camera, task["exposure"].get("exposure_s"), task["exposure"].get("iso"))
+    cap = capture(radiance, camera, int(task["seed"]), background, exposure, full=False)
+    image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    truth_uv = marker_pixels(camera, scenario)
+    truth = {
+        "markers_px": truth_uv.tolist(),
+        "range_m": scenario.range_m,
+        "yaw_deg": scenario.yaw_deg,
+        "side": scenario.side,
+    }
+    saturation = marker_core_saturation(cap, camera, scenario)
+    colours = marker_colours(image_bgr, truth_uv, saturation, (cap.x0, cap.y0))
+    base = {
+        **{k: v for k, v in task["scenario"].items()},
+        "seed": int(task["seed"]),
+        "exposure_s": cap.exposure.exposure_s,
+        "analog_gain": cap.exposure.analog_gain,
+        "iso": cap.exposure.iso,
+        "frame_saturated_fraction": cap.saturated_fraction,
+        "core_saturated_fraction_mean": float(np.nanmean([m["saturated_fraction"] for m in saturation])),
+        "core_saturated_fraction_max": float(np.nanmax([m["saturated_fraction"] for m in saturation])),
+        "marker_spacing_px": _min_spacing(truth_uv),
+        "core_diameter_px": float(2 * np.mean([m["core_radius_px"] for m in saturation])),
+        **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
+    }
+    rows = []
+    for tracker in task.get("trackers", TRACKERS):
+        for estimator in task.get("estimators", ESTIMATORS):
+            ev = evaluate_detection(
+                image_bgr,
+                scenario.camera,
+                truth,
+                tracker=tracker,
+                estimator=estimator,
+                beacon=scenario.beacon,
+                crop_origin_px=(cap.x0, cap.y0),
+            )
+            rows.append(
+                {
+                    **base,
+                    "tracker": tracker,
+                    "estimator": estimator,
+                    "detected": bool(ev["detected"]),
+                    "side_detected": ev.get("side"),
+                    "side_correct": bool(ev.get("side_correct")),
+                    "numbering_correct": bool(ev.get("numbering_correct")),
+                    "centroid_rms_px": _num(ev.get("centroid_rms_px")),
+                    "range_est_m": _num(ev.get("range_m")),
+                    "range_err_m": _num(ev.get("range_error_m")),
+                    "yaw_est_deg": _num(ev.get("yaw_deg")),
+                    "yaw_err_deg": _num(ev.get("yaw_error_deg")),
+                    "reason": ev.get("reason") or "",
+                }
+            )
+    return rows
+
+
+def marker_colours(image_bgr, uv, saturation: list[dict], origin: tuple[int, int]) -> list[dict]:
+    """Mean colour of each marker's core in the saved image (true positions, so it does
+    not depend on any detector): linear-RGB chromaticity (r, g) and mean sRGB (0-1)."""
+    import colour
+
+    h, w = image_bgr.shape[:2]
+    out = []
+    for (u, v), sat in zip(uv, saturation, strict=True):
+        r = max(sat["core_radius_px"], 1.0)
+        x, y = u - origin[0], v - origin[1]
+        c0, c1 = max(math.floor(x - r), 0), min(math.ceil(x + r) + 1, w)
+        r0, r1 = max(math.floor(y - r), 0), min(math.ceil(y + r) + 1, h)
+        if c1 <= c0 or r1 <= r0:
+            out.append({"r_chroma": math.nan, "g_chroma": math.nan, "R": math.nan, "G": math.nan, "B": math.nan})
+            continue
+        yy, xx = np.mgrid[r0:r1, c0:c1]
+        core = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+        srgb = image_bgr[r0:r1, c0:c1][core][:, ::-1].astype(np.float64) / 255.0
+        lin = colour.cctf_decoding(srgb, function="sRGB").mean(axis=0)
+        total = lin.sum()
+        mean_srgb = colour.cctf_encoding(lin, function="sRGB")
+        out.append(
+            {
+                "r_chroma": float(lin[0] / total) if total > 0 else math.nan,
+                "g_chroma": float(lin[1] / total) if total > 0 else math.nan,
+                "R": float(mean_srgb[0]),
+                "G": float(mean_srgb[1]),
+                "B": float(mean_srgb[2]),
+            }
+        )
+    return out
+
+
+def _min_spacing(uv) -> float:
+    uv = np.asarray(uv, float)
+    d = np.hypot(*(uv[:, None, :] - uv[None, :, :]).transpose(2, 0, 1))
+    d[np.eye(len(uv), dtype=bool)] = np.inf
+    return float(d.min())
+
+
+def _num(x) -> float:
+    return float(x) if x is not None and np.isfinite(x) else math.nan
