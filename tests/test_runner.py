@@ -1,0 +1,67 @@
+"""Sweep runner: resumable after SIGKILL, local pool and Dask give identical tables."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from studies.runner import ResultStore, run_tasks, task_key
+
+FN = "studies.runner:selftest_task"
+TASKS = [{"seed": s, "n": 1000 + 17 * s, "sleep_s": 0.4} for s in range(24)]
+
+
+def _table(rows) -> bytes:
+    return json.dumps(rows, sort_keys=True).encode()
+
+
+def test_sequential_run_and_store(tmp_path):
+    rows = run_tasks(TASKS[:5], tmp_path, FN, workers=1, progress=False)
+    assert [r["seed"] for r in rows] == [0, 1, 2, 3, 4]
+    store = ResultStore(tmp_path / "tasks")
+    key = task_key(FN, TASKS[0], 1)
+    assert store.get(key) == rows[:1]
+    store.path(key).write_text("{broken")  # a damaged entry is dropped and recomputed
+    assert run_tasks(TASKS[:5], tmp_path, FN, workers=1, progress=False) == rows
+
+
+def _run_in_subprocess(out):
+    code = (
+        "import sys, json; from studies.runner import run_tasks; from tests.test_runner import TASKS, FN;"
+        f"rows = run_tasks(TASKS, r'{out}', FN, workers=2, progress=False);"
+        f"open(r'{out}/table.json', 'w').write(json.dumps(rows, sort_keys=True))"
+    )
+    return subprocess.Popen([sys.executable, "-c", code], cwd=os.getcwd(), start_new_session=True)
+
+
+def test_sigkill_and_resume_gives_the_same_table(tmp_path):
+    reference = _table(run_tasks(TASKS, tmp_path / "ref", FN, workers=2, progress=False))
+    out = tmp_path / "killed"
+    out.mkdir()
+    rng = random.Random(7)
+    for _ in range(3):  # kill the whole process group at random moments
+        proc = _run_in_subprocess(out)
+        time.sleep(rng.uniform(1.0, 2.0))
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finished = len(list((out / "tasks").rglob("*.json"))) if (out / "tasks").exists() else 0
+    assert finished < len(TASKS), "the kills came too late to test resuming"
+    resumed = run_tasks(TASKS, out, FN, workers=2, progress=False)
+    assert _table(resumed) == reference
+
+
+def test_dask_local_cluster_gives_the_same_table(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    local = _table(run_tasks(TASKS[:8], tmp_path / "pool", FN, workers=2, progress=False))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        remote = _table(
+            run_tasks(TASKS[:8], tmp_path / "dask", FN, scheduler=cluster.scheduler_address, progress=False)
+        )
+    assert remote == local
