@@ -1,0 +1,67 @@
+"""Maximum-range estimation on synthetic frames with a known fall-off."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from studies.max_range import estimate_max_range, failure_cause
+
+
+def _frames(r50, s, ranges, per_range, seed=0):
+    rng = np.random.default_rng(seed)
+    rows = []
+    for r in ranges:
+        p = 1 / (1 + math.exp((r - r50) / s))
+        for _ in range(per_range):
+            ok = bool(rng.random() < p)
+            rows.append(
+                {
+                    "range_m": r,
+                    "detected": ok,
+                    "side_correct": ok,
+                    "numbering_correct": ok,
+                    "range_err_m": 0.0,
+                    "yaw_err_deg": 0.0,
+                    "core_saturated_fraction_mean": 0.0,
+                    "reason": "" if ok else "no blob",
+                    "marker_spacing_px": 50.0,
+                    "core_diameter_px": 5.0,
+                }
+            )
+    return rows
+
+
+def test_recovers_the_true_95_percent_range_within_its_interval():
+    r50, s = 8.0, 0.6
+    truth = r50 - s * math.log(19)
+    result = estimate_max_range(_frames(r50, s, np.arange(2, 14.01, 0.5), 40))
+    assert result.low_m <= truth <= result.high_m
+    assert result.max_range_m == pytest.approx(truth, abs=0.5)
+    assert result.limiting_cause == "signal-to-noise"
+
+
+def test_continuous_not_a_grid_point():
+    result = estimate_max_range(_frames(6.3, 0.4, [2, 4, 6, 8, 10], 60, seed=3))
+    assert result.max_range_m not in (2, 4, 6, 8, 10)
+
+
+def test_all_correct_is_only_bounded_below():
+    result = estimate_max_range(_frames(100.0, 0.5, [1, 2, 3], 10))
+    assert result.max_range_m == 3 and math.isinf(result.high_m)
+
+
+def test_failure_causes():
+    base = {
+        "detected": False,
+        "reason": "",
+        "core_saturated_fraction_mean": 0.0,
+        "marker_spacing_px": 50.0,
+        "core_diameter_px": 5.0,
+    }
+    assert failure_cause({**base, "core_saturated_fraction_mean": 0.9}) == "saturation"
+    assert failure_cause({**base, "marker_spacing_px": 8.0}) == "resolution / merging"
+    assert failure_cause(base) == "signal-to-noise"
+    assert failure_cause({**base, "detected": True, "side_correct": False}) == "colour"
