@@ -153,3 +153,33 @@ def _min_spacing(uv) -> float:
 
 def _num(x) -> float:
     return float(x) if x is not None and np.isfinite(x) else math.nan
+
+
+def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:
+    """The saved image around the target (±``half_width_m`` at the marker plane), scaled
+    to ``size_px`` with nearest-neighbour so camera pixels stay visible; PNG bytes."""
+    import cv2
+
+    from camera_models.camera import load_camera
+    from camera_models.capture import capture, marker_pixels
+    from scenes.background import render_background
+    from scenes.render import render
+    from scenes.render_cache import RenderCache
+
+    scenario = frame_scenario(task)
+    cache = RenderCache()
+    camera = load_camera(scenario.camera)
+    radiance = render(scenario, cache)
+    background = render_background(scenario, cache) if camera.exposure.mode == "auto" else None
+    cap = capture(radiance, camera, int(task["seed"]), background, full=False)
+    image = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)
+    u, v = marker_pixels(camera, scenario)[0] - np.array([cap.x0, cap.y0])
+    half = max(2, round(half_width_m * camera.geometry.focal_length_px / scenario.range_m))
+    padded = cv2.copyMakeBorder(image, half, half, half, half, cv2.BORDER_CONSTANT, value=(0, 0, 0))
+    cu, cv_ = round(u) + half, round(v) + half
+    crop = padded[cv_ - half:cv_ + half, cu - half:cu + half]
+    crop = cv2.resize(crop, (size_px, size_px), interpolation=cv2.INTER_NEAREST)
+    ok, png = cv2.imencode(".png", crop)
+    if not ok:
+        raise RuntimeError("mosaic: PNG encoding failed")
+    return png.tobytes()

@@ -1,0 +1,164 @@
+"""What every study shares: options, frame tasks with pose jitter, result tables, plots.
+
+Frames of one nominal condition differ by sensor-noise seed and by a small pose jitter
+(range ±0.5 %, yaw ±0.5°, camera height ±5 mm, drawn deterministically from the
+condition and the jitter index), so detection probabilities are not those of a single
+lucky pose. ``jitter_poses`` jittered poses are rendered per condition; seeds cycle
+over them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from scenes.render_cache import atomic_write_bytes
+
+RENDER = {"spp": 4, "oversampling": 2, "crop": "beacon", "near_field_spp": 1024}
+"""Render settings of study frames (near-field marker renders cached per configuration)."""
+
+
+@dataclass(frozen=True)
+class StudyOptions:
+    """What a study sweeps (each study has full and quick defaults)."""
+
+    cameras: tuple[str, ...]
+    beacons: tuple[str, ...] = ("v2",)
+    sides: tuple[str, ...] = ("red",)
+    ranges_m: tuple[float, ...] = (2.0, 5.0)
+    yaws_deg: tuple[float, ...] = (0.0,)
+    environments: tuple[str, ...] = ("dark",)
+    currents_mA: tuple[float, ...] = (20.0,)
+    seeds: int = 2
+    jitter_poses: int = 2
+    diffusers: tuple[tuple[bool, int, str], ...] = ((True, 1, "matched"),)
+    render: dict = field(default_factory=lambda: dict(RENDER))
+
+    def validate(self) -> None:
+        """Fail fast, before any work, with one line naming the bad option."""
+        from camera_models.geometry import camera_names
+        from scenes.beacon import BEACON_NAMES
+        from scenes.diffusers import DiffuserConfig
+        from scenes.environment import ENVIRONMENT_NAMES
+        from scenes.led import SIDE_COLOURS, led_for_side
+
+        _check_choices("cameras", self.cameras, camera_names())
+        _check_choices("beacons", self.beacons, BEACON_NAMES)
+        _check_choices("sides", self.sides, SIDE_COLOURS)
+        _check_choices("environments", self.environments, ENVIRONMENT_NAMES)
+        for name, values in (("ranges_m", self.ranges_m), ("yaws_deg", self.yaws_deg),
+                             ("currents_mA", self.currents_mA)):
+            if not values:
+                raise ValueError(f"{name}: expected at least one value, got an empty list")
+            if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
+                raise ValueError(f"{name}: expected finite numbers, got {list(values)}")
+        if min(self.ranges_m) <= 0:
+            raise ValueError(f"ranges_m: expected distances > 0 m, got {list(self.ranges_m)}")
+        if max(abs(y) for y in self.yaws_deg) > 90:
+            raise ValueError(f"yaws_deg: expected angles in [-90, 90], got {list(self.yaws_deg)}")
+        for current in self.currents_mA:
+            if current <= 0:
+                raise ValueError(f"currents_mA: expected currents > 0 mA, got {current!r}")
+            for side in self.sides:
+                led_for_side(side).check_current(current)
+        if not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ValueError(f"seeds: expected an integer >= 1, got {self.seeds!r}")
+        for foam, sheets, colour in self.diffusers:
+            DiffuserConfig(foam, sheets, colour).validate()
+
+    def with_overrides(self, **overrides) -> StudyOptions:
+        """These options with the user's non-None overrides."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+def _check_choices(name: str, values: Sequence[str], allowed: Sequence[str]) -> None:
+    if not values:
+        raise ValueError(f"{name}: expected at least one of {', '.join(allowed)}, got an empty list")
+    bad = [v for v in values if v not in allowed]
+    if bad:
+        raise ValueError(f"{name}: expected some of {', '.join(allowed)}, got unknown {', '.join(map(str, bad))}")
+
+
+def jitter(condition: dict, index: int) -> dict:
+    """Deterministic small pose offsets for jittered pose ``index`` of a condition (0: none)."""
+    if index == 0:
+        return {"range_scale": 1.0, "yaw_offset_deg": 0.0, "height_m": 0.0}
+    digest = hashlib.sha256(repr((sorted(condition.items()), index)).encode()).digest()
+    u = np.frombuffer(digest[:24], dtype=np.uint64).astype(np.float64) / 2.0**64 * 2 - 1  # three in (-1, 1)
+    return {"range_scale": 1.0 + 0.005 * u[0], "yaw_offset_deg": 0.5 * u[1], "height_m": 0.005 * u[2]}
+
+
+def frame_tasks(conditions: Iterable[dict], options: StudyOptions, exposure: dict | None = None,
+                trackers: Sequence[str] | None = None, estimators: Sequence[str] | None = None) -> list[dict]:
+    """Frame tasks for every condition × seed (see module docstring).
+
+    A condition holds Scenario fields; ``range_m``/``yaw_deg`` are nominal and get jittered.
+    """
+    tasks = []
+    for condition in conditions:
+        for seed in range(options.seeds):
+            j = jitter(condition, seed % options.jitter_poses)
+            scenario = dict(condition)
+            scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
+            scenario["yaw_deg"] = round(max(-90.0, min(90.0, condition["yaw_deg"] + j["yaw_offset_deg"])), 9)
+            scenario["camera_height_m"] = round(j["height_m"], 9)
+            task = {"scenario": scenario, "render": dict(options.render), "seed": seed,
+                    "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]}}
+            if exposure:
+                task["exposure"] = exposure
+            if trackers:
+                task["trackers"] = list(trackers)
+            if estimators:
+                task["estimators"] = list(estimators)
+            tasks.append(task)
+    return tasks
+
+
+def write_tables(out: Path, rows: list[dict]) -> object:
+    """results.csv and results.parquet (one row per frame × detector); returns the DataFrame."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    csv = frame.to_csv(index=False, float_format="%.9g").encode()
+    atomic_write_bytes(out / "results.csv", csv)
+    import io
+
+    buf = io.BytesIO()
+    frame.to_parquet(buf, index=False)
+    atomic_write_bytes(out / "results.parquet", buf.getvalue())
+    return frame
+
+
+def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
+    """Per group and x: frames, correct detections, Wilson 95 % interval."""
+    import pandas as pd
+
+    from studies.metrics import detection_success, wilson_interval
+
+    frame = frame.assign(success=[detection_success(r) for r in frame.to_dict("records")])
+    out = []
+    for key, group in frame.groupby([*by, x], sort=True):
+        k, n = int(group["success"].sum()), len(group)
+        p, lo, hi = wilson_interval(k, n)
+        out.append({**dict(zip([*by, x], key if isinstance(key, tuple) else (key,), strict=True)),
+                    "frames": n, "detected": k, "p_detect": p, "p_low": lo, "p_high": hi})
+    return pd.DataFrame(out)
+
+
+def add_nominal_columns(rows: list[dict], tasks: list[dict]) -> list[dict]:
+    """Copy each task's nominal range/yaw onto its rows (rows come in task order)."""
+    out, i = [], 0
+    for task in tasks:
+        per_task = len(task.get("trackers", ["thesis", "best"])) * len(task.get("estimators", ["thesis", "best"]))
+        for row in rows[i:i + per_task]:
+            out.append({**row, "nominal_range_m": task["nominal"]["range_m"],
+                        "nominal_yaw_deg": task["nominal"]["yaw_deg"]})
+        i += per_task
+    if i != len(rows):
+        raise RuntimeError("rows and tasks do not line up")
+    return out

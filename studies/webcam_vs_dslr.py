@@ -1,0 +1,198 @@
+"""Study ``webcam-vs-dslr``: which camera sees the beacon farthest and keeps its colours.
+
+Sweep: cameras × beacons × sides × ranges × environments × seeds (with pose jitter),
+markers as the study built them (foam + 1 sheet of matched paper, datasheet current),
+each camera at its study settings (T6 manual ISO 6400, 1/60 s; webcams automatic).
+Outputs: detection probability versus range per camera and tracker (Wilson 95 %),
+maximum range (:mod:`studies.max_range`), colour separability of the sides in
+linear-RGB chromaticity (pairwise Mahalanobis distance, ΔE2000 of mean colours) and the
+detectors' colour confusion matrices, a ranking, and the study's image mosaic (the same
+target at 2, 5 and 7 m through every camera).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+
+from scenes.render_cache import atomic_write_bytes
+from studies.common import StudyOptions, add_nominal_columns, detection_curve, frame_tasks, write_tables
+from studies.max_range import estimate_max_range
+from studies.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
+from studies.report import Report
+from studies.runner import run_tasks
+
+NAME = "webcam-vs-dslr"
+ALL_CAMERAS = ("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm")
+MOSAIC_RANGES_M = (2.0, 5.0, 7.0)
+
+
+def default_options(quick: bool) -> StudyOptions:
+    """Full grid, or the quick one the main job runs."""
+    if quick:
+        return StudyOptions(cameras=ALL_CAMERAS, sides=("red", "green"), ranges_m=(2.0, 5.0, 7.0, 10.0),
+                            seeds=2, jitter_poses=1)
+    return StudyOptions(cameras=ALL_CAMERAS, beacons=("v1", "v2"), sides=("red", "green", "blue", "yellow"),
+                        ranges_m=tuple(float(r) for r in range(1, 11)), environments=("dark", "lit-room"),
+                        seeds=10, jitter_poses=3)
+
+
+def conditions(o: StudyOptions) -> list[dict]:
+    """Nominal conditions of the sweep."""
+    out = []
+    for camera, beacon, side, env, r, (foam, sheets, colour) in itertools.product(
+            o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.diffusers):
+        out.append({"beacon": beacon, "side": side, "range_m": float(r), "yaw_deg": 0.0, "camera": camera,
+                    "environment": env, "led_current_mA": float(o.currents_mA[0]), "foam": foam,
+                    "paper_sheets": sheets, "paper_colour": colour})
+    return out
+
+
+def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
+    """Run the study into ``out``; returns the summary."""
+    tasks = frame_tasks(conditions(options), options)
+    rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
+    frame = write_tables(out, add_nominal_columns(rows, tasks))
+    summary = analyse(frame)
+    mosaic = mosaic_png(options, out)
+    _report(out, options, frame, summary, mosaic)
+    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    return summary
+
+
+def analyse(frame) -> dict:
+    """Headline numbers: max range per camera and tracker, colour separability, ranking."""
+    summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
+    best = frame[(frame.estimator == "best")]
+    for (camera, beacon, env, tracker), g in best.groupby(["camera", "beacon", "environment", "tracker"]):
+        mr = estimate_max_range(g.to_dict("records"))
+        summary["max_range"].append({"camera": camera, "beacon": beacon, "environment": env, "tracker": tracker,
+                                     **mr.to_dict()})
+    frames = frame[(frame.tracker == "best") & (frame.estimator == "best")]  # one row per frame
+    for camera, g in frames.groupby("camera"):
+        sep = colour_separability(g)
+        summary["colour_separability"].append({"camera": camera, **sep})
+    by_camera = {}
+    for rec in summary["max_range"]:
+        if rec["tracker"] == "best":
+            by_camera.setdefault(rec["camera"], []).append(rec["max_range_m"])
+    seps = {s["camera"]: s["min_mahalanobis"] for s in summary["colour_separability"]}
+    ranking = sorted(by_camera, key=lambda c: (-np.nanmean(by_camera[c]), -np.nan_to_num(seps.get(c, 0.0))))
+    summary["ranking"] = [{"rank": i + 1, "camera": c, "max_range_m": float(np.nanmean(by_camera[c])),
+                           "min_colour_mahalanobis": seps.get(c)} for i, c in enumerate(ranking)]
+    return summary
+
+
+def colour_separability(frames) -> dict:
+    """Pairwise separability of the sides' marker colours seen by one camera.
+
+    Each frame contributes its five markers' chromaticities (r, g); the distance
+    between two sides is the Mahalanobis distance of their chromaticity samples under
+    the pooled covariance, and ΔE2000 compares their mean sRGB colours.
+    """
+    samples, means = {}, {}
+    for side, g in frames.groupby("side"):
+        chroma = np.array([[row[f"marker{i}_r_chroma"], row[f"marker{i}_g_chroma"]]
+                           for row in g.to_dict("records") for i in range(1, 6)])
+        srgb = np.array([[row[f"marker{i}_{c}"] for c in "RGB"] for row in g.to_dict("records") for i in range(1, 6)])
+        samples[side] = chroma[np.all(np.isfinite(chroma), axis=1)]
+        means[side] = np.nanmean(srgb, axis=0)
+    pairs = []
+    for a, b in itertools.combinations(sorted(samples), 2):
+        pairs.append({"pair": f"{a}-{b}", "mahalanobis": mahalanobis_separability(samples[a], samples[b]),
+                      "delta_e_2000": delta_e_2000(means[a], means[b])})
+    m = [p["mahalanobis"] for p in pairs if np.isfinite(p["mahalanobis"])]
+    return {"pairs": pairs, "min_mahalanobis": float(min(m)) if m else None,
+            "mean_srgb": {k: v.tolist() for k, v in means.items()}}
+
+
+def mosaic_png(options: StudyOptions, out: Path) -> bytes:
+    """The same target at 2, 5 and 7 m through every camera (first side and beacon)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import cv2
+    import matplotlib.pyplot as plt
+
+    from studies.frame import target_crop_png
+
+    cams = options.cameras
+    fig, axes = plt.subplots(len(cams), len(MOSAIC_RANGES_M), figsize=(2.6 * len(MOSAIC_RANGES_M), 2.6 * len(cams)),
+                             squeeze=False, constrained_layout=True)
+    for i, cam in enumerate(cams):
+        for j, r in enumerate(MOSAIC_RANGES_M):
+            cond = conditions(StudyOptions(cameras=(cam,), beacons=options.beacons[:1], sides=options.sides[:1],
+                                           ranges_m=(r,), environments=options.environments[:1],
+                                           currents_mA=options.currents_mA, diffusers=options.diffusers[:1]))
+            task = frame_tasks(cond, StudyOptions(cameras=(cam,), seeds=1, jitter_poses=1, render=options.render))[0]
+            png = target_crop_png(task)
+            img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+            ax = axes[i, j]
+            ax.imshow(img)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(f"{r:g} m")
+            if j == 0:
+                ax.set_ylabel(cam, fontsize=9)
+    fig.suptitle(f"{options.beacons[0].upper()} {options.sides[0]} side, 240 mm square around marker 1, "
+                 "saved JPEG, camera pixels shown as blocks")
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    atomic_write_bytes(out / "mosaic.png", buf.getvalue())
+    return buf.getvalue()
+
+
+def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: bytes) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    rep = Report("Webcam vs DSLR: how far each camera sees the beacon, and whether it keeps the colours")
+    rep.text(f"{len(frame) // 4} frames: cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; "
+             f"sides {', '.join(options.sides)}; ranges {', '.join(f'{r:g}' for r in options.ranges_m)} m; "
+             f"environments {', '.join(options.environments)}; {options.seeds} seeds per condition. Markers: foam + 1 "
+             "sheet of matched paper at the datasheet current; T6 at ISO 6400, 1/60 s; webcams expose automatically.")
+    rep.heading("Ranking")
+    rep.table(pd.DataFrame(summary["ranking"]), "Cameras by maximum range (best tracker), then colour separability")
+    rep.heading("Detection probability versus range")
+    curve = detection_curve(frame[frame.estimator == "best"], ["camera", "tracker"])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for ax, tracker in zip(axes, ("thesis", "best"), strict=True):
+        for cam, g in curve[curve.tracker == tracker].groupby("camera"):
+            ax.errorbar(g.nominal_range_m, g.p_detect, yerr=[g.p_detect - g.p_low, g.p_high - g.p_detect],
+                        marker="o", capsize=3, label=cam)
+        ax.axhline(0.95, color="grey", ls=":", lw=1)
+        ax.set_title(f"{tracker} tracker")
+        ax.set_xlabel("range, m")
+    axes[0].set_ylabel("P(correct side, 5 markers numbered)")
+    axes[1].legend(fontsize=8)
+    rep.figure(fig, "Probability of a correct detection with Wilson 95 % intervals; dotted line: 0.95.")
+    rep.heading("Maximum range")
+    rep.table(pd.DataFrame(summary["max_range"]).drop(columns=["frames", "successes"]),
+              "Largest range with P(correct) ≥ 0.95 (logistic fit, bootstrap 95 % interval) and the limiting cause")
+    rep.heading("Colour separability")
+    rows = [{"camera": s["camera"], **p} for s in summary["colour_separability"] for p in s["pairs"]]
+    if rows:
+        rep.table(pd.DataFrame(rows), "Pairwise separability of side colours (chromaticity Mahalanobis; ΔE2000)")
+    frames = frame[frame.estimator == "best"]
+    for tracker in ("thesis", "best"):
+        g = frames[frames.tracker == tracker]
+        sides = sorted(set(g.side))
+        labels = list(sides) + [c for c in ("red", "green", "blue", "yellow") if c not in sides]
+        for cam, gc in g.groupby("camera"):
+            m = confusion_matrix(list(gc.side), [x if isinstance(x, str) else None for x in gc.side_detected], labels)
+            table = pd.DataFrame(m[: len(sides)], columns=[*labels, "none"])
+            table.insert(0, "true side", sides)
+            rep.table(table, f"Colour confusion, {tracker} tracker, {cam} (frames)", float_format="{:.0f}")
+    rep.heading("Mosaic")
+    rep.image_png(mosaic, "The same target at 2, 5 and 7 m as each camera saves it")
+    rep.write(out / "report.html")
