@@ -245,21 +245,97 @@ def diffuser_mosaic_cmd(
     console.print(f"wrote {out / 'diffuser_mosaic.png'} and diffuser_mosaic.json")
 
 
-@app.command("main-job")
-def main_job(out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job")) -> None:
-    """Run the main job on the built-in default scenario.
+STUDIES = ("webcam-vs-dslr", "brightness-diffuser", "range-limit")
 
-    Renders the V2 beacon's red side at 5 m and 10° yaw for the Canon T6 + 18 mm in the
-    cave's dark zone, at the default render settings, and writes the radiance, a
-    preview and the metadata to OUT.
-    """
-    from scenes.render_cache import RenderCache
-    from scenes.scenario import Scenario
+
+def _study_module(name: str):
+    import importlib
+
+    if name not in STUDIES:
+        raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
+    return importlib.import_module(f"studies.{name.replace('-', '_')}")
+
+
+def _csv(name: str, text: str | None, convert=str) -> tuple | None:
+    """Parse a comma-separated option, or None when not given."""
+    if text is None:
+        return None
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    try:
+        return tuple(convert(t) for t in items)
+    except ValueError:
+        raise UsageError(f"{name}: expected a comma-separated list of numbers, got {text!r}") from None
+
+
+@app.command()
+def study(
+    name: Annotated[str, typer.Argument(help="webcam-vs-dslr, brightness-diffuser or range-limit.")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    quick: Annotated[bool, typer.Option("--quick", help="The small grid the main job runs.")] = False,
+    cameras: Annotated[str | None, typer.Option("--cameras", help="Comma-separated camera names.")] = None,
+    ranges: Annotated[str | None, typer.Option("--ranges", help="Comma-separated ranges, m.")] = None,
+    currents: Annotated[str | None, typer.Option("--currents", help="Comma-separated LED currents, mA.")] = None,
+    seeds: Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="Local worker processes (default: CPUs).")] = None,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")] = None,
+) -> None:
+    """Run a study sweep and write report.html, results.csv/.parquet and summary.json."""
+    module = _study_module(name)
+    options = module.default_options(quick).with_overrides(
+        cameras=_csv("cameras", cameras),
+        ranges_m=_csv("ranges", ranges, float),
+        currents_mA=_csv("currents", currents, float),
+        seeds=seeds,
+    )
+    options.validate()
+    if workers is not None and workers < 1:
+        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    module.run(out, options, workers=workers, scheduler=scheduler)
+    console.print(f"{name}: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
+
+
+@app.command()
+def validate(
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    quick: Annotated[bool, typer.Option("--quick", help="Fewer conditions and seeds.")] = False,
+    seeds: Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="Local worker processes (default: CPUs).")] = None,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")] = None,
+) -> None:
+    """Predict the source study's tests with its own detector and settings (validation.csv, report.html)."""
+    from studies import validate as validation
+
+    if seeds is not None and seeds < 1:
+        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    validation.run(out, quick, workers=workers, scheduler=scheduler, seeds=seeds)
+    console.print(f"validate: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
+
+
+@app.command("main-job")
+def main_job(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job"),
+    workers: Annotated[int | None, typer.Option("--workers", help="Local worker processes (default: CPUs).")] = None,
+) -> None:
+    """Run the quick versions of the three studies on the built-in defaults."""
+    from studies.report import Report
 
     prepare_out_dir(out)
-    scenario = Scenario(beacon="v2", side="red", range_m=5.0, yaw_deg=10.0, camera="canon-t6-18mm")
-    write_render(out, scenario, RenderCache())
-    console.print(f"main job done: look at {out / 'preview.png'}")
+    t0 = time.perf_counter()
+    index = Report("beacon-sim main job: quick studies")
+    for name in STUDIES:
+        module = _study_module(name)
+        options = module.default_options(True)
+        options.validate()
+        target = prepare_out_dir(out / name)
+        module.run(target, options, workers=workers)
+        index.parts.append(f"<p><a href='{name}/report.html'>{name}</a></p>")
+    index.text(f"Finished in {time.perf_counter() - t0:.0f} s.", note=True)
+    index.write(out / "index.html")
+    console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 
 
 def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:

@@ -51,8 +51,11 @@ class StudyOptions:
         _check_choices("beacons", self.beacons, BEACON_NAMES)
         _check_choices("sides", self.sides, SIDE_COLOURS)
         _check_choices("environments", self.environments, ENVIRONMENT_NAMES)
-        for name, values in (("ranges_m", self.ranges_m), ("yaws_deg", self.yaws_deg),
-                             ("currents_mA", self.currents_mA)):
+        for name, values in (
+            ("ranges_m", self.ranges_m),
+            ("yaws_deg", self.yaws_deg),
+            ("currents_mA", self.currents_mA),
+        ):
             if not values:
                 raise ValueError(f"{name}: expected at least one value, got an empty list")
             if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
@@ -93,8 +96,13 @@ def jitter(condition: dict, index: int) -> dict:
     return {"range_scale": 1.0 + 0.005 * u[0], "yaw_offset_deg": 0.5 * u[1], "height_m": 0.005 * u[2]}
 
 
-def frame_tasks(conditions: Iterable[dict], options: StudyOptions, exposure: dict | None = None,
-                trackers: Sequence[str] | None = None, estimators: Sequence[str] | None = None) -> list[dict]:
+def frame_tasks(
+    conditions: Iterable[dict],
+    options: StudyOptions,
+    exposure: dict | None = None,
+    trackers: Sequence[str] | None = None,
+    estimators: Sequence[str] | None = None,
+) -> list[dict]:
     """Frame tasks for every condition × seed (see module docstring).
 
     A condition holds Scenario fields; ``range_m``/``yaw_deg`` are nominal and get jittered.
@@ -107,8 +115,12 @@ def frame_tasks(conditions: Iterable[dict], options: StudyOptions, exposure: dic
             scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
             scenario["yaw_deg"] = round(max(-90.0, min(90.0, condition["yaw_deg"] + j["yaw_offset_deg"])), 9)
             scenario["camera_height_m"] = round(j["height_m"], 9)
-            task = {"scenario": scenario, "render": dict(options.render), "seed": seed,
-                    "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]}}
+            task = {
+                "scenario": scenario,
+                "render": dict(options.render),
+                "seed": seed,
+                "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]},
+            }
             if exposure:
                 task["exposure"] = exposure
             if trackers:
@@ -145,8 +157,16 @@ def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
     for key, group in frame.groupby([*by, x], sort=True):
         k, n = int(group["success"].sum()), len(group)
         p, lo, hi = wilson_interval(k, n)
-        out.append({**dict(zip([*by, x], key if isinstance(key, tuple) else (key,), strict=True)),
-                    "frames": n, "detected": k, "p_detect": p, "p_low": lo, "p_high": hi})
+        out.append(
+            {
+                **dict(zip([*by, x], key if isinstance(key, tuple) else (key,), strict=True)),
+                "frames": n,
+                "detected": k,
+                "p_detect": p,
+                "p_low": lo,
+                "p_high": hi,
+            }
+        )
     return pd.DataFrame(out)
 
 
@@ -155,9 +175,10 @@ def add_nominal_columns(rows: list[dict], tasks: list[dict]) -> list[dict]:
     out, i = [], 0
     for task in tasks:
         per_task = len(task.get("trackers", ["thesis", "best"])) * len(task.get("estimators", ["thesis", "best"]))
-        for row in rows[i:i + per_task]:
-            out.append({**row, "nominal_range_m": task["nominal"]["range_m"],
-                        "nominal_yaw_deg": task["nominal"]["yaw_deg"]})
+        for row in rows[i : i + per_task]:
+            out.append(
+                {**row, "nominal_range_m": task["nominal"]["range_m"], "nominal_yaw_deg": task["nominal"]["yaw_deg"]}
+            )
         i += per_task
     if i != len(rows):
         raise RuntimeError("rows and tasks do not line up")

@@ -177,7 +177,7 @@ def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) 
     half = max(2, round(half_width_m * camera.geometry.focal_length_px / scenario.range_m))
     padded = cv2.copyMakeBorder(image, half, half, half, half, cv2.BORDER_CONSTANT, value=(0, 0, 0))
     cu, cv_ = round(u) + half, round(v) + half
-    crop = padded[cv_ - half:cv_ + half, cu - half:cu + half]
+    crop = padded[cv_ - half : cv_ + half, cu - half : cu + half]
     crop = cv2.resize(crop, (size_px, size_px), interpolation=cv2.INTER_NEAREST)
     ok, png = cv2.imencode(".png", crop)
     if not ok:

@@ -33,21 +33,40 @@ MOSAIC_RANGES_M = (2.0, 5.0, 7.0)
 def default_options(quick: bool) -> StudyOptions:
     """Full grid, or the quick one the main job runs."""
     if quick:
-        return StudyOptions(cameras=ALL_CAMERAS, sides=("red", "green"), ranges_m=(2.0, 5.0, 7.0, 10.0),
-                            seeds=2, jitter_poses=1)
-    return StudyOptions(cameras=ALL_CAMERAS, beacons=("v1", "v2"), sides=("red", "green", "blue", "yellow"),
-                        ranges_m=tuple(float(r) for r in range(1, 11)), environments=("dark", "lit-room"),
-                        seeds=10, jitter_poses=3)
+        return StudyOptions(
+            cameras=ALL_CAMERAS, sides=("red", "green"), ranges_m=(2.0, 5.0, 7.0, 10.0), seeds=2, jitter_poses=1
+        )
+    return StudyOptions(
+        cameras=ALL_CAMERAS,
+        beacons=("v1", "v2"),
+        sides=("red", "green", "blue", "yellow"),
+        ranges_m=tuple(float(r) for r in range(1, 11)),
+        environments=("dark", "lit-room"),
+        seeds=10,
+        jitter_poses=3,
+    )
 
 
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep."""
     out = []
     for camera, beacon, side, env, r, (foam, sheets, colour) in itertools.product(
-            o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.diffusers):
-        out.append({"beacon": beacon, "side": side, "range_m": float(r), "yaw_deg": 0.0, "camera": camera,
-                    "environment": env, "led_current_mA": float(o.currents_mA[0]), "foam": foam,
-                    "paper_sheets": sheets, "paper_colour": colour})
+        o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.diffusers
+    ):
+        out.append(
+            {
+                "beacon": beacon,
+                "side": side,
+                "range_m": float(r),
+                "yaw_deg": 0.0,
+                "camera": camera,
+                "environment": env,
+                "led_current_mA": float(o.currents_mA[0]),
+                "foam": foam,
+                "paper_sheets": sheets,
+                "paper_colour": colour,
+            }
+        )
     return out
 
 
@@ -69,8 +88,9 @@ def analyse(frame) -> dict:
     best = frame[(frame.estimator == "best")]
     for (camera, beacon, env, tracker), g in best.groupby(["camera", "beacon", "environment", "tracker"]):
         mr = estimate_max_range(g.to_dict("records"))
-        summary["max_range"].append({"camera": camera, "beacon": beacon, "environment": env, "tracker": tracker,
-                                     **mr.to_dict()})
+        summary["max_range"].append(
+            {"camera": camera, "beacon": beacon, "environment": env, "tracker": tracker, **mr.to_dict()}
+        )
     frames = frame[(frame.tracker == "best") & (frame.estimator == "best")]  # one row per frame
     for camera, g in frames.groupby("camera"):
         sep = colour_separability(g)
@@ -81,8 +101,15 @@ def analyse(frame) -> dict:
             by_camera.setdefault(rec["camera"], []).append(rec["max_range_m"])
     seps = {s["camera"]: s["min_mahalanobis"] for s in summary["colour_separability"]}
     ranking = sorted(by_camera, key=lambda c: (-np.nanmean(by_camera[c]), -np.nan_to_num(seps.get(c, 0.0))))
-    summary["ranking"] = [{"rank": i + 1, "camera": c, "max_range_m": float(np.nanmean(by_camera[c])),
-                           "min_colour_mahalanobis": seps.get(c)} for i, c in enumerate(ranking)]
+    summary["ranking"] = [
+        {
+            "rank": i + 1,
+            "camera": c,
+            "max_range_m": float(np.nanmean(by_camera[c])),
+            "min_colour_mahalanobis": seps.get(c),
+        }
+        for i, c in enumerate(ranking)
+    ]
     return summary
 
 
@@ -95,18 +122,31 @@ def colour_separability(frames) -> dict:
     """
     samples, means = {}, {}
     for side, g in frames.groupby("side"):
-        chroma = np.array([[row[f"marker{i}_r_chroma"], row[f"marker{i}_g_chroma"]]
-                           for row in g.to_dict("records") for i in range(1, 6)])
+        chroma = np.array(
+            [
+                [row[f"marker{i}_r_chroma"], row[f"marker{i}_g_chroma"]]
+                for row in g.to_dict("records")
+                for i in range(1, 6)
+            ]
+        )
         srgb = np.array([[row[f"marker{i}_{c}"] for c in "RGB"] for row in g.to_dict("records") for i in range(1, 6)])
         samples[side] = chroma[np.all(np.isfinite(chroma), axis=1)]
         means[side] = np.nanmean(srgb, axis=0)
     pairs = []
     for a, b in itertools.combinations(sorted(samples), 2):
-        pairs.append({"pair": f"{a}-{b}", "mahalanobis": mahalanobis_separability(samples[a], samples[b]),
-                      "delta_e_2000": delta_e_2000(means[a], means[b])})
+        pairs.append(
+            {
+                "pair": f"{a}-{b}",
+                "mahalanobis": mahalanobis_separability(samples[a], samples[b]),
+                "delta_e_2000": delta_e_2000(means[a], means[b]),
+            }
+        )
     m = [p["mahalanobis"] for p in pairs if np.isfinite(p["mahalanobis"])]
-    return {"pairs": pairs, "min_mahalanobis": float(min(m)) if m else None,
-            "mean_srgb": {k: v.tolist() for k, v in means.items()}}
+    return {
+        "pairs": pairs,
+        "min_mahalanobis": float(min(m)) if m else None,
+        "mean_srgb": {k: v.tolist() for k, v in means.items()},
+    }
 
 
 def mosaic_png(options: StudyOptions, out: Path) -> bytes:
@@ -120,13 +160,26 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
     from studies.frame import target_crop_png
 
     cams = options.cameras
-    fig, axes = plt.subplots(len(cams), len(MOSAIC_RANGES_M), figsize=(2.6 * len(MOSAIC_RANGES_M), 2.6 * len(cams)),
-                             squeeze=False, constrained_layout=True)
+    fig, axes = plt.subplots(
+        len(cams),
+        len(MOSAIC_RANGES_M),
+        figsize=(2.6 * len(MOSAIC_RANGES_M), 2.6 * len(cams)),
+        squeeze=False,
+        constrained_layout=True,
+    )
     for i, cam in enumerate(cams):
         for j, r in enumerate(MOSAIC_RANGES_M):
-            cond = conditions(StudyOptions(cameras=(cam,), beacons=options.beacons[:1], sides=options.sides[:1],
-                                           ranges_m=(r,), environments=options.environments[:1],
-                                           currents_mA=options.currents_mA, diffusers=options.diffusers[:1]))
+            cond = conditions(
+                StudyOptions(
+                    cameras=(cam,),
+                    beacons=options.beacons[:1],
+                    sides=options.sides[:1],
+                    ranges_m=(r,),
+                    environments=options.environments[:1],
+                    currents_mA=options.currents_mA,
+                    diffusers=options.diffusers[:1],
+                )
+            )
             task = frame_tasks(cond, StudyOptions(cameras=(cam,), seeds=1, jitter_poses=1, render=options.render))[0]
             png = target_crop_png(task)
             img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
@@ -138,8 +191,10 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
                 ax.set_title(f"{r:g} m")
             if j == 0:
                 ax.set_ylabel(cam, fontsize=9)
-    fig.suptitle(f"{options.beacons[0].upper()} {options.sides[0]} side, 240 mm square around marker 1, "
-                 "saved JPEG, camera pixels shown as blocks")
+    fig.suptitle(
+        f"{options.beacons[0].upper()} {options.sides[0]} side, 240 mm square around marker 1, "
+        "saved JPEG, camera pixels shown as blocks"
+    )
     import io
 
     buf = io.BytesIO()
@@ -157,10 +212,12 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     import pandas as pd
 
     rep = Report("Webcam vs DSLR: how far each camera sees the beacon, and whether it keeps the colours")
-    rep.text(f"{len(frame) // 4} frames: cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; "
-             f"sides {', '.join(options.sides)}; ranges {', '.join(f'{r:g}' for r in options.ranges_m)} m; "
-             f"environments {', '.join(options.environments)}; {options.seeds} seeds per condition. Markers: foam + 1 "
-             "sheet of matched paper at the datasheet current; T6 at ISO 6400, 1/60 s; webcams expose automatically.")
+    rep.text(
+        f"{len(frame) // 4} frames: cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; "
+        f"sides {', '.join(options.sides)}; ranges {', '.join(f'{r:g}' for r in options.ranges_m)} m; "
+        f"environments {', '.join(options.environments)}; {options.seeds} seeds per condition. Markers: foam + 1 "
+        "sheet of matched paper at the datasheet current; T6 at ISO 6400, 1/60 s; webcams expose automatically."
+    )
     rep.heading("Ranking")
     rep.table(pd.DataFrame(summary["ranking"]), "Cameras by maximum range (best tracker), then colour separability")
     rep.heading("Detection probability versus range")
@@ -168,8 +225,14 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for ax, tracker in zip(axes, ("thesis", "best"), strict=True):
         for cam, g in curve[curve.tracker == tracker].groupby("camera"):
-            ax.errorbar(g.nominal_range_m, g.p_detect, yerr=[g.p_detect - g.p_low, g.p_high - g.p_detect],
-                        marker="o", capsize=3, label=cam)
+            ax.errorbar(
+                g.nominal_range_m,
+                g.p_detect,
+                yerr=[g.p_detect - g.p_low, g.p_high - g.p_detect],
+                marker="o",
+                capsize=3,
+                label=cam,
+            )
         ax.axhline(0.95, color="grey", ls=":", lw=1)
         ax.set_title(f"{tracker} tracker")
         ax.set_xlabel("range, m")
@@ -177,8 +240,10 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     axes[1].legend(fontsize=8)
     rep.figure(fig, "Probability of a correct detection with Wilson 95 % intervals; dotted line: 0.95.")
     rep.heading("Maximum range")
-    rep.table(pd.DataFrame(summary["max_range"]).drop(columns=["frames", "successes"]),
-              "Largest range with P(correct) ≥ 0.95 (logistic fit, bootstrap 95 % interval) and the limiting cause")
+    rep.table(
+        pd.DataFrame(summary["max_range"]).drop(columns=["frames", "successes"]),
+        "Largest range with P(correct) ≥ 0.95 (logistic fit, bootstrap 95 % interval) and the limiting cause",
+    )
     rep.heading("Colour separability")
     rows = [{"camera": s["camera"], **p} for s in summary["colour_separability"] for p in s["pairs"]]
     if rows:
