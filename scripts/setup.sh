@@ -29,6 +29,14 @@ if ! have_llvm; then
     fi
 fi
 
+# Headless Chromium for the report tests (opened through Playwright, no browser download).
+if ! command -v chromium >/dev/null && [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing Debian's chromium for the report tests"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq chromium >/dev/null
+fi
+
 PY=${PYTHON:-}
 if [ -z "$PY" ]; then
     for c in python3.11 python3; do

@@ -1,0 +1,115 @@
+"""Studies end to end on tiny grids: files, tables, reports that render in Chromium."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pandas as pd
+import pytest
+
+from studies import brightness_diffuser, range_limit, validate, webcam_vs_dslr
+
+pytestmark = pytest.mark.usefixtures("mitsuba_variant")
+TINY = {"spp": 2, "oversampling": 1, "crop": "target", "near_field_spp": 64}
+
+
+def _check_outputs(out, summary_keys=()):
+    for name in ("report.html", "results.csv", "results.parquet", "summary.json"):
+        assert (out / name).is_file(), name
+    summary = json.loads((out / "summary.json").read_text())
+    for key in summary_keys:
+        assert key in summary
+    csv = pd.read_csv(out / "results.csv")
+    parquet = pd.read_parquet(out / "results.parquet")
+    assert len(csv) == len(parquet) > 0
+    return summary, csv
+
+
+def test_webcam_vs_dslr_tiny(tmp_path):
+    o = webcam_vs_dslr.default_options(True).with_overrides(
+        cameras=("logitech-c270",), sides=("red", "green"), ranges_m=(4.0,), seeds=1, render=TINY
+    )
+    webcam_vs_dslr.run(tmp_path, o, workers=1)
+    _, csv = _check_outputs(tmp_path, ("ranking", "max_range", "colour_separability"))
+    assert set(csv.tracker) == {"thesis", "best"} and set(csv.estimator) == {"thesis", "best"}
+    assert (tmp_path / "mosaic.png").stat().st_size > 1000
+
+
+def test_brightness_diffuser_tiny(tmp_path):
+    o = brightness_diffuser.default_options(True).with_overrides(
+        cameras=("logitech-c270",), currents_mA=(2.0, 20.0), diffusers=((True, 1, "white"),), seeds=1, render=TINY
+    )
+    summary = brightness_diffuser.run(tmp_path, o, workers=1)
+    _check_outputs(tmp_path, ("recommended",))
+    powers = {c["led_current_mA"]: c["led_power_mW"] for c in summary["configurations"]}
+    assert powers[20.0] == pytest.approx(10 * powers[2.0], rel=1e-9)  # red LED, γ = 1
+
+
+def test_range_limit_tiny(tmp_path):
+    o = range_limit.default_options(True).with_overrides(
+        cameras=("logitech-c270",), yaws_deg=(0.0,), ranges_m=(3.0, 6.0), seeds=1, render=TINY
+    )
+    summary = range_limit.run(tmp_path, o, workers=1)
+    _check_outputs(tmp_path, ("max_range",))
+    rec = summary["max_range"][0]
+    assert set(rec) >= {"camera", "beacon", "side", "yaw_deg", "max_range_m", "low_m", "high_m", "limiting_cause"}
+
+
+def test_validate_tiny(tmp_path, monkeypatch):
+    pairs = validate.test_conditions(True)
+    subset = [p for p in pairs if p[0] == "range" and p[1]["range_m"] in (2.0, 10.0)][:2]
+    subset += [p for p in pairs if p[0] == "primary"][:2]
+    monkeypatch.setattr(validate, "test_conditions", lambda quick: subset)
+    monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
+    rows = validate.run(tmp_path, True, workers=1, seeds=1)
+    table = pd.read_csv(tmp_path / "validation.csv")
+    assert list(table.columns[:11]) == [
+        "test",
+        "camera",
+        "beacon",
+        "side",
+        "environment",
+        "range_m",
+        "yaw_deg",
+        "detected_fraction",
+        "merged_or_lost_fraction",
+        "colour_correct_fraction",
+        "range_est_m",
+    ]
+    assert "yaw_est_deg" in table.columns and len(rows) == len(table) == len(subset)
+    assert (tmp_path / "report.html").is_file()
+    verdicts = json.loads((tmp_path / "summary.json").read_text())["conclusions"]
+    assert all(v["simulation"] in ("agree", "disagree") for v in verdicts)
+
+
+def _tiny_options(**kw):
+    from studies.common import StudyOptions
+
+    kw["render"] = TINY
+    return StudyOptions(**kw)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is installed by scripts/setup.sh")
+def test_report_renders_in_headless_chromium(tmp_path):
+    playwright = pytest.importorskip("playwright.sync_api")
+    o = range_limit.default_options(True).with_overrides(
+        cameras=("logitech-c270",), yaws_deg=(0.0,), ranges_m=(3.0, 6.0), seeds=1, render=TINY
+    )
+    range_limit.run(tmp_path, o, workers=1)
+    errors = []
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(
+            executable_path=shutil.which("chromium"),
+            args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"],
+        )
+        page = browser.new_page()
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto((tmp_path / "report.html").as_uri())
+        images = page.eval_on_selector_all("img", "els => els.map(e => [e.complete, e.naturalWidth])")
+        title = page.title()
+        browser.close()
+    assert title.startswith("Range limit")
+    assert images and all(done and width > 0 for done, width in images)
+    assert errors == []
