@@ -114,6 +114,7 @@ def detect(
     sigma_px: float = 0.3,
     tracker_settings: TrackerSettings | None = None,
     thesis_settings: ThesisTrackerSettings | None = None,
+    track_cache: dict | None = None,
 ) -> Detection:
     """Detect the beacon side in ``image`` and estimate the camera pose.
 
@@ -141,6 +142,9 @@ def detect(
         Centroid noise assumed for the best estimator's covariance, px.
     tracker_settings, thesis_settings
         Tracker parameters (the beacon of ``tracker_settings`` is overridden by ``beacon``).
+    track_cache
+        A dict shared by calls on the *same image with the same settings* that differ only
+        in ``estimator``: the tracker then runs once (it is by far the slower stage).
     """
     _check_choice("tracker", tracker, TRACKERS)
     _check_choice("estimator", estimator, ESTIMATORS)
@@ -168,13 +172,17 @@ def detect(
     if calibration is not None:
         bgr, intr = undistort(bgr, calibration, alpha, origin)
         new_k = intr.matrix()
-    if tracker == "thesis":
+    if track_cache is not None and tracker in track_cache:
+        tr = track_cache[tracker]
+    elif tracker == "thesis":
         tr = thesis_track(bgr, intr, thesis_settings, origin)
     else:
         settings = tracker_settings or TrackerSettings()
         if settings.beacon != beacon:
             settings = TrackerSettings(**{**settings.__dict__, "beacon": beacon})
         tr = track(bgr, intr, settings, origin)
+    if track_cache is not None:
+        track_cache[tracker] = tr
     result.side, result.notes = tr.side, list(tr.notes)
     if not tr.found:
         result.reason = tr.reason

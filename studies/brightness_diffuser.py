@@ -4,8 +4,8 @@ For every camera, side and chosen range it sweeps the LED current (log-spaced), 
 or off, 0-5 sheets and white versus matching paper, and maps the probability of a
 correct detection (best tracker; the study's beside it), the colour separability of the
 marker from the other sides' reference colours, and the fraction of saturated pixels in
-the marker cores. A configuration is in the *operating window* when P(correct) ≥ 0.95
-(Wilson lower bound ≥ 0.8) and the mean core saturation is below 50 %; the recommended
+the marker cores. A configuration is in the *operating window* when the estimated P(correct) ≥ 0.95
+(its Wilson interval is reported beside it) and the mean core saturation is below 50 %; the recommended
 setting per camera and side is the window's configuration with the largest margin in
 saturation, reported with the LED's radiant power (mW, datasheet model) at that current.
 Renders do not depend on the current (linearity), so the current sweep costs no renders.
@@ -116,7 +116,7 @@ def configuration_table(frame):
             g_chroma=float(np.nanmean(chroma[:, 1])),
             led_power_mW=1e3 * led_for_side(rec["side"]).radiant_flux_W(rec["led_current_mA"]),
         )
-        rec["in_window"] = bool(p >= 0.95 and lo >= 0.8 and rec["core_saturation"] < 0.5)
+        rec["in_window"] = bool(p >= 0.95 and rec["core_saturation"] < 0.5)
         out.append(rec)
     return pd.DataFrame(out)
 

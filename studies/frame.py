@@ -81,6 +81,7 @@ def simulate_frame(task: dict) -> list[dict]:
     }
     rows = []
     for tracker in task.get("trackers", TRACKERS):
+        tracked: dict = {}  # the tracker runs once; each estimator reuses its result
         for estimator in task.get("estimators", ESTIMATORS):
             ev = evaluate_detection(
                 image_bgr,
@@ -90,6 +91,7 @@ def simulate_frame(task: dict) -> list[dict]:
                 estimator=estimator,
                 beacon=scenario.beacon,
                 crop_origin_px=(cap.x0, cap.y0),
+                track_cache=tracked,
             )
             rows.append(
                 {

@@ -111,7 +111,7 @@ def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) ->
             boot.append(b50 - bs * LN19)
     low, high = np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan)
     near = [x for x in fails if abs(float(x["range_m"]) - r95) <= 0.25 * max(r95, 1.0)] or fails
-    return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(high), _dominant(near), n, k)
+    return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(max(high, 0.0)), _dominant(near), n, k)
 
 
 def _dominant(rows: list[dict]) -> str:

@@ -118,11 +118,14 @@ def _report(out: Path, options: StudyOptions, summary: dict) -> None:
             continue
         fig, ax = plt.subplots(figsize=(8, 4.5))
         for (cam, beacon, side), g in frame.groupby(["camera", "beacon", "side"]):
-            hi = np.where(np.isfinite(g.high_m), g.high_m, g.max_range_m)
+            r = np.nan_to_num(g.max_range_m.to_numpy(float))
+            lo = np.nan_to_num(g.low_m.to_numpy(float))
+            hi = np.where(np.isfinite(g.high_m), g.high_m, r)
+            # bars clipped at zero: the bootstrap interval need not contain a fit clipped at 0 m
             ax.errorbar(
                 g.yaw_deg,
-                g.max_range_m,
-                yerr=[g.max_range_m - g.low_m, hi - g.max_range_m],
+                r,
+                yerr=[np.clip(r - lo, 0, None), np.clip(hi - r, 0, None)],
                 marker="o",
                 capsize=3,
                 label=f"{cam}, {beacon}, {side}",
