@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, add_nominal_columns, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, write_tables
 from studies.metrics import detection_success, wilson_interval
 from studies.report import Report
 from studies.runner import run_tasks
@@ -82,7 +82,7 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
     """Run the study into ``out``; returns the summary."""
     tasks = frame_tasks(conditions(options), options, estimators=["best"])
     rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, add_nominal_columns(rows, tasks))
+    frame = write_tables(out, rows)
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
     _report(out, options, table, summary)

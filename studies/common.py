@@ -168,18 +168,3 @@ def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
             }
         )
     return pd.DataFrame(out)
-
-
-def add_nominal_columns(rows: list[dict], tasks: list[dict]) -> list[dict]:
-    """Copy each task's nominal range/yaw onto its rows (rows come in task order)."""
-    out, i = [], 0
-    for task in tasks:
-        per_task = len(task.get("trackers", ["thesis", "best"])) * len(task.get("estimators", ["thesis", "best"]))
-        for row in rows[i : i + per_task]:
-            out.append(
-                {**row, "nominal_range_m": task["nominal"]["range_m"], "nominal_yaw_deg": task["nominal"]["yaw_deg"]}
-            )
-        i += per_task
-    if i != len(rows):
-        raise RuntimeError("rows and tasks do not line up")
-    return out

@@ -8,6 +8,8 @@ worker process or a Dask cluster):
 ``seed``       sensor-noise seed
 ``exposure``   optional manual settings ``{"iso": .., "exposure_s": ..}`` (else the camera's)
 ``trackers``, ``estimators``  which detectors to run (default both of each)
+``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
+``tags``       optional fields copied into every row (e.g. the test's name)
 
 :func:`simulate_frame` returns one row per tracker × estimator with the task's
 parameters, the camera's exposure, ground truth, detection and pose results, and the
@@ -20,7 +22,7 @@ import math
 
 import numpy as np
 
-FRAME_VERSION = 1
+FRAME_VERSION = 2
 """Bump when a change alters the rows a task produces (invalidates stored results)."""
 
 TRACKERS = ("thesis", "best")
@@ -68,7 +70,10 @@ def simulate_frame(task: dict) -> list[dict]:
     colours = marker_colours(image_bgr, truth_uv, saturation, (cap.x0, cap.y0))
     base = {
         **{k: v for k, v in task["scenario"].items()},
+        **task.get("tags", {}),
         "seed": int(task["seed"]),
+        "nominal_range_m": task.get("nominal", {}).get("range_m", scenario.range_m),
+        "nominal_yaw_deg": task.get("nominal", {}).get("yaw_deg", scenario.yaw_deg),
         "exposure_s": cap.exposure.exposure_s,
         "analog_gain": cap.exposure.analog_gain,
         "iso": cap.exposure.iso,
@@ -80,7 +85,7 @@ def simulate_frame(task: dict) -> list[dict]:
         **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
     }
     rows = []
-    for tracker in task.get("trackers", TRACKERS):
+    for tracker, label, settings in _detectors(task):
         tracked: dict = {}  # the tracker runs once; each estimator reuses its result
         for estimator in task.get("estimators", ESTIMATORS):
             ev = evaluate_detection(
@@ -91,12 +96,14 @@ def simulate_frame(task: dict) -> list[dict]:
                 estimator=estimator,
                 beacon=scenario.beacon,
                 crop_origin_px=(cap.x0, cap.y0),
+                thesis_settings=settings,
                 track_cache=tracked,
             )
             rows.append(
                 {
                     **base,
                     "tracker": tracker,
+                    "thresholds": label,
                     "estimator": estimator,
                     "detected": bool(ev["detected"]),
                     "side_detected": ev.get("side"),
@@ -111,6 +118,27 @@ def simulate_frame(task: dict) -> list[dict]:
                 }
             )
     return rows
+
+
+def _detectors(task: dict):
+    """(tracker, threshold label, thesis settings) to run: the study's tracker once per
+    HSV threshold variant in ``task["thesis_hsv_variants"]`` (label → per-colour boxes,
+    None for the study's own numbers), the best tracker once."""
+    from pipeline.thesis_tracker import ThesisTrackerSettings
+
+    variants = task.get("thesis_hsv_variants") or {"study": None}
+    for tracker in task.get("trackers", TRACKERS):
+        if tracker != "thesis":
+            yield tracker, "", None
+            continue
+        for label, boxes in variants.items():
+            settings = None
+            if boxes:
+                ranges = {
+                    c: [tuple(tuple(int(x) for x in corner) for corner in box) for box in b] for c, b in boxes.items()
+                }
+                settings = ThesisTrackerSettings(hsv_ranges=ranges)
+            yield tracker, label, settings
 
 
 def marker_colours(image_bgr, uv, saturation: list[dict], origin: tuple[int, int]) -> list[dict]:
@@ -155,6 +183,26 @@ def _min_spacing(uv) -> float:
 
 def _num(x) -> float:
     return float(x) if x is not None and np.isfinite(x) else math.nan
+
+
+def saved_frame(task: dict):
+    """The image the camera saves for a task (decoded JPEG, BGR) and its frame origin."""
+    import cv2
+
+    from camera_models.camera import load_camera
+    from camera_models.capture import capture
+    from scenes.background import render_background
+    from scenes.render import render
+    from scenes.render_cache import RenderCache
+
+    scenario = frame_scenario(task)
+    cache = RenderCache()
+    camera = load_camera(scenario.camera)
+    radiance = render(scenario, cache)
+    needs_background = camera.exposure.mode == "auto" or scenario.env.has_ambient
+    background = render_background(scenario, cache) if needs_background else None
+    cap = capture(radiance, camera, int(task["seed"]), background, full=False)
+    return cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR), (cap.x0, cap.y0)
 
 
 def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, add_nominal_columns, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, write_tables
 from studies.max_range import estimate_max_range
 from studies.report import Report
 from studies.runner import run_tasks
@@ -69,7 +69,7 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
     """Run the study into ``out``; returns the summary (``max_range`` records)."""
     tasks = frame_tasks(conditions(options), options, estimators=["best"])
     rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, add_nominal_columns(rows, tasks))
+    frame = write_tables(out, rows)
     records = []
     for key, g in frame.groupby(["camera", "beacon", "side", "nominal_yaw_deg", "tracker"], sort=True):
         cam, beacon, side, yaw, tracker = key

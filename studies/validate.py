@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, add_nominal_columns, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, write_tables
 from studies.report import Report
 from studies.runner import run_tasks
 
@@ -95,7 +95,12 @@ def test_conditions(quick: bool) -> list[tuple[str, dict]]:
 def run(
     out: Path, quick: bool, workers: int | None = None, scheduler: str | None = None, seeds: int | None = None
 ) -> list[dict]:
-    """Run every test into ``out``; returns the validation rows."""
+    """Run every test into ``out``; returns the validation rows.
+
+    As the study did, the preliminary test's 150 mm captures set the colour thresholds
+    (:func:`pipeline.thesis_tracker.derive_hsv_ranges`); the range and primary tests are
+    then scored with the study's printed thresholds and with these derived ones.
+    """
     pairs = test_conditions(quick)
     options = StudyOptions(
         cameras=("canon-t6-18mm",),
@@ -103,21 +108,47 @@ def run(
         jitter_poses=1,
         render={"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024},
     )
-    tasks, names = [], []
-    for test, cond in pairs:
-        new = frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"])
-        tasks += new
-        names += [test] * len(new)
-    rows = add_nominal_columns(run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME), tasks)
-    for row, test in zip(rows, names, strict=True):
-        row["test"] = test
+
+    def tasks_for(tests: set[str], variants: dict | None) -> list[dict]:
+        tasks = []
+        for test, cond in pairs:
+            if test in tests:
+                for t in frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]):
+                    t["tags"] = {"test": test}
+                    if variants:
+                        t["thesis_hsv_variants"] = variants
+                    tasks.append(t)
+        return tasks
+
+    preliminary = tasks_for({"preliminary"}, None)
+    rows = run_tasks(preliminary, out, workers=workers, scheduler=scheduler, description=f"{NAME} preliminary")
+    derived = derive_thresholds(preliminary)
+    atomic_write_bytes(out / "derived_thresholds.json", json.dumps(derived, indent=1).encode())
+    later = tasks_for({"range", "primary"}, {"study": None, "derived": derived})
+    rows += run_tasks(later, out, workers=workers, scheduler=scheduler, description=f"{NAME} range + primary")
     frame = write_tables(out, rows)
     table = validation_table(frame)
     atomic_write_bytes(out / "validation.csv", table.to_csv(index=False, float_format="%.6g").encode())
-    verdicts = conclusions(table, frame)
-    _report(out, table, verdicts)
-    atomic_write_bytes(out / "summary.json", json.dumps({"study": NAME, "conclusions": verdicts}, indent=2).encode())
+    verdicts = [v for label in ("study", "derived") for v in conclusions(table, frame, label)]
+    _report(out, table, verdicts, derived)
+    summary = {"study": NAME, "conclusions": verdicts, "derived_thresholds": derived}
+    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
     return table.to_dict("records")
+
+
+def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
+    """Per colour, HSV boxes from the preliminary captures (the study's procedure)."""
+    from pipeline.thesis_tracker import derive_hsv_ranges
+    from studies.frame import saved_frame
+
+    out = {}
+    for colour in ("red", "green", "blue", "yellow"):
+        images = [saved_frame(t)[0] for t in preliminary_tasks if t["scenario"]["side"] == colour]
+        try:
+            out[colour] = [[list(lo), list(hi)] for lo, hi in derive_hsv_ranges(images, colour)]
+        except ValueError:
+            out[colour] = []  # no lit pixels: that colour cannot be thresholded
+    return out
 
 
 def _true_colour_blobs(reason: str, side: str) -> int | None:
@@ -129,7 +160,7 @@ def validation_table(frame):
     """One row per tested condition (means over seeds)."""
     import pandas as pd
 
-    keys = ["test", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg"]
+    keys = ["test", "thresholds", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg"]
     out = []
     for key, g in frame.groupby(keys, sort=False):
         rec = dict(zip(keys, key, strict=True))
@@ -152,13 +183,18 @@ def validation_table(frame):
                 "range_est_m": float(np.nanmean(g.range_est_m)) if g.range_est_m.notna().any() else np.nan,
                 "yaw_est_deg": float(np.nanmean(g.yaw_est_deg)) if g.yaw_est_deg.notna().any() else np.nan,
                 "core_saturation": float(np.nanmean(g.core_saturated_fraction_mean)),
+                "thresholds": rec["thresholds"],
             }
         )
     return pd.DataFrame(out)
 
 
-def conclusions(table, frame) -> list[dict]:
-    """The study's headline conclusions (THESIS_FACTS §10) against the predictions."""
+def conclusions(table, frame, thresholds: str = "study") -> list[dict]:
+    """The study's headline conclusions (THESIS_FACTS §10) against the predictions made
+    with the given colour thresholds (``study``: its printed numbers; ``derived``: its
+    procedure applied to the simulated preliminary captures)."""
+    table = table[table.thresholds == thresholds]
+    frame = frame[frame.thresholds == thresholds]
     prim = table[(table.test == "primary") & (table.camera == "canon-t6-18mm")]
     rng = table[table.test == "range"]
     web = rng[rng.camera == "logitech-c270"]
@@ -166,7 +202,14 @@ def conclusions(table, frame) -> list[dict]:
     out = []
 
     def verdict(claim, ok, evidence):
-        out.append({"conclusion": claim, "simulation": "agree" if ok else "disagree", "evidence": evidence})
+        out.append(
+            {
+                "thresholds": thresholds,
+                "conclusion": claim,
+                "simulation": "agree" if ok else "disagree",
+                "evidence": evidence,
+            }
+        )
 
     verdict(
         "The DSLR (18 mm) detected the markers up to 5 m and 30°",
@@ -214,7 +257,7 @@ def conclusions(table, frame) -> list[dict]:
     return out
 
 
-def _report(out: Path, table, verdicts: list[dict]) -> None:
+def _report(out: Path, table, verdicts: list[dict], derived: dict) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -227,15 +270,21 @@ def _report(out: Path, table, verdicts: list[dict]) -> None:
         "(Gibbs shortcut, weights 0.05/0.05/0.45/0.45); T6 at ISO 6400, 1/60 s; webcams automatic. Markers "
         "as built: foam + 1 sheet of matched paper at the datasheet current (dimmer setting unknown)."
     )
+    rep.text(
+        "Colour thresholds: 'study' = the study's printed HSV ranges; 'derived' = the study's procedure "
+        "(percentiles of the lit pixels of the 150 mm preliminary captures) applied to the simulated captures: "
+        + "; ".join(f"{c}: {b}" for c, b in derived.items())
+    )
     rep.heading("The study's conclusions")
     rep.table(pd.DataFrame(verdicts), "Headline conclusions (THESIS_FACTS §10) against the simulation")
     prim = table[table.test == "primary"]
     if len(prim):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-        for cam, g in prim.groupby("camera"):
+        for (thr, cam), g in prim.groupby(["thresholds", "camera"]):
             for y, gy in g.groupby("yaw_deg"):
-                axes[0].plot(gy.range_m, gy.detected_fraction, marker="o", label=f"{cam}, {y:g}°")
-                axes[1].plot(gy.range_m, gy.range_est_m - gy.range_m, marker="o", label=f"{cam}, {y:g}°")
+                label = f"{cam}, {y:g}°, {thr} thresholds"
+                axes[0].plot(gy.range_m, gy.detected_fraction, marker="o", label=label)
+                axes[1].plot(gy.range_m, gy.range_est_m - gy.range_m, marker="o", label=label)
         axes[0].set_ylabel("detected fraction")
         axes[1].set_ylabel("range estimate − truth, m")
         for ax in axes:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, add_nominal_columns, detection_curve, frame_tasks, write_tables
+from studies.common import StudyOptions, detection_curve, frame_tasks, write_tables
 from studies.max_range import estimate_max_range
 from studies.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.report import Report
@@ -74,7 +74,7 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
     """Run the study into ``out``; returns the summary."""
     tasks = frame_tasks(conditions(options), options)
     rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, add_nominal_columns(rows, tasks))
+    frame = write_tables(out, rows)
     summary = analyse(frame)
     mosaic = mosaic_png(options, out)
     _report(out, options, frame, summary, mosaic)

@@ -58,13 +58,14 @@ def test_range_limit_tiny(tmp_path):
 
 def test_validate_tiny(tmp_path, monkeypatch):
     pairs = validate.test_conditions(True)
-    subset = [p for p in pairs if p[0] == "range" and p[1]["range_m"] in (2.0, 10.0)][:2]
-    subset += [p for p in pairs if p[0] == "primary"][:2]
+    subset = [next(p for p in pairs if p[0] == "preliminary" and p[1]["side"] == "red")]
+    subset += [next(p for p in pairs if p[0] == "range" and p[1]["range_m"] == 10.0)]
+    subset += [next(p for p in pairs if p[0] == "primary")]
     monkeypatch.setattr(validate, "test_conditions", lambda quick: subset)
     monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
     rows = validate.run(tmp_path, True, workers=1, seeds=1)
     table = pd.read_csv(tmp_path / "validation.csv")
-    assert list(table.columns[:11]) == [
+    assert list(table.columns[:12]) == [
         "test",
         "camera",
         "beacon",
@@ -76,10 +77,15 @@ def test_validate_tiny(tmp_path, monkeypatch):
         "merged_or_lost_fraction",
         "colour_correct_fraction",
         "range_est_m",
+        "yaw_est_deg",
     ]
-    assert "yaw_est_deg" in table.columns and len(rows) == len(table) == len(subset)
-    assert (tmp_path / "report.html").is_file()
+    # the preliminary test once; the later tests with the study's and the derived thresholds
+    assert len(rows) == len(table) == 1 + 2 * 2
+    assert set(table.thresholds) == {"study", "derived"}
+    derived = json.loads((tmp_path / "derived_thresholds.json").read_text())
+    assert derived["red"] and not derived["blue"]  # only red was captured here
     verdicts = json.loads((tmp_path / "summary.json").read_text())["conclusions"]
+    assert {v["thresholds"] for v in verdicts} == {"study", "derived"}
     assert all(v["simulation"] in ("agree", "disagree") for v in verdicts)
 
 
