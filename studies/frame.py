@@ -10,6 +10,7 @@ worker process or a Dask cluster):
 ``trackers``, ``estimators``  which detectors to run (default both of each)
 ``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
 ``tags``       optional fields copied into every row (e.g. the test's name)
+``full_frame`` capture and detect on the whole frame instead of the rendered crop
 
 :func:`simulate_frame` returns one row per tracker × estimator with the task's
 parameters, the camera's exposure, ground truth, detection and pose results, and the
@@ -57,7 +58,7 @@ def simulate_frame(task: dict) -> list[dict]:
     exposure = None
     if task.get("exposure"):
         exposure = manual_exposure(camera, task["exposure"].get("exposure_s"), task["exposure"].get("iso"))
-    cap = capture(radiance, camera, int(task["seed"]), background, exposure, full=False)
+    cap = capture(radiance, camera, int(task["seed"]), background, exposure, full=bool(task.get("full_frame")))
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     truth_uv = marker_pixels(camera, scenario)
     truth = {
@@ -82,6 +83,7 @@ def simulate_frame(task: dict) -> list[dict]:
         "core_saturated_fraction_max": float(np.nanmax([m["saturated_fraction"] for m in saturation])),
         "marker_spacing_px": _min_spacing(truth_uv),
         "core_diameter_px": float(2 * np.mean([m["core_radius_px"] for m in saturation])),
+        "worker_peak_rss_MiB": _peak_rss_mib(),
         **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
     }
     rows = []
@@ -172,6 +174,13 @@ def marker_colours(image_bgr, uv, saturation: list[dict], origin: tuple[int, int
             }
         )
     return out
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process so far, MiB (Linux reports KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _min_spacing(uv) -> float:
