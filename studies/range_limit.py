@@ -31,6 +31,7 @@ def default_options(quick: bool) -> StudyOptions:
             cameras=("canon-t6-18mm", "logitech-c270"),
             yaws_deg=(0.0, 30.0),
             ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0),
+            currents_mA=(2.0,),
             seeds=3,
             jitter_poses=1,
         )
@@ -39,6 +40,7 @@ def default_options(quick: bool) -> StudyOptions:
         beacons=("v1", "v2"),
         yaws_deg=(0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0),
         ranges_m=tuple(float(r) for r in range(1, 15)),
+        currents_mA=(2.0, 20.0),
         seeds=8,
         jitter_poses=2,
     )
@@ -54,13 +56,13 @@ def conditions(o: StudyOptions) -> list[dict]:
             "yaw_deg": float(y),
             "camera": cam,
             "environment": env,
-            "led_current_mA": float(o.currents_mA[0]),
+            "led_current_mA": float(current),
             "foam": foam,
             "paper_sheets": n,
             "paper_colour": colour,
         }
-        for cam, beacon, side, env, y, r, (foam, n, colour) in itertools.product(
-            o.cameras, o.beacons, o.sides, o.environments, o.yaws_deg, o.ranges_m, o.diffusers
+        for cam, beacon, side, env, y, r, current, (foam, n, colour) in itertools.product(
+            o.cameras, o.beacons, o.sides, o.environments, o.yaws_deg, o.ranges_m, o.currents_mA, o.diffusers
         )
     ]
 
@@ -71,14 +73,16 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
     rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
     frame = write_tables(out, rows)
     records = []
-    for key, g in frame.groupby(["camera", "beacon", "side", "nominal_yaw_deg", "tracker"], sort=True):
-        cam, beacon, side, yaw, tracker = key
+    keys = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]
+    for key, g in frame.groupby(keys, sort=True):
+        cam, beacon, side, current, yaw, tracker = key
         mr = estimate_max_range(g.to_dict("records"))
         records.append(
             {
                 "camera": cam,
                 "beacon": beacon,
                 "side": side,
+                "led_current_mA": float(current),
                 "yaw_deg": float(yaw),
                 "tracker": tracker,
                 "max_range_m": mr.max_range_m,
@@ -117,7 +121,7 @@ def _report(out: Path, options: StudyOptions, summary: dict) -> None:
         if frame.empty:
             continue
         fig, ax = plt.subplots(figsize=(8, 4.5))
-        for (cam, beacon, side), g in frame.groupby(["camera", "beacon", "side"]):
+        for (cam, beacon, side, current), g in frame.groupby(["camera", "beacon", "side", "led_current_mA"]):
             r = np.nan_to_num(g.max_range_m.to_numpy(float))
             lo = np.nan_to_num(g.low_m.to_numpy(float))
             hi = np.where(np.isfinite(g.high_m), g.high_m, r)
@@ -128,7 +132,7 @@ def _report(out: Path, options: StudyOptions, summary: dict) -> None:
                 yerr=[np.clip(r - lo, 0, None), np.clip(hi - r, 0, None)],
                 marker="o",
                 capsize=3,
-                label=f"{cam}, {beacon}, {side}",
+                label=f"{cam}, {beacon}, {side}, {current:g} mA",
             )
         ax.axhline(PLANNED_RANGE_M, color="red", ls="--", lw=1, label="planned 10 m")
         ax.set_xlabel("yaw, degrees")

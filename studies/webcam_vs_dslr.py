@@ -28,13 +28,21 @@ from studies.runner import run_tasks
 NAME = "webcam-vs-dslr"
 ALL_CAMERAS = ("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm")
 MOSAIC_RANGES_M = (2.0, 5.0, 7.0)
+DRIVES_MA = (2.0, 20.0)
+"""LED drive: the study dimmed its LEDs with potentiometers to an unknown setting, so the
+sweep brackets it: 20 mA (datasheet test current) and 2 mA (a tenth, well dimmed)."""
 
 
 def default_options(quick: bool) -> StudyOptions:
     """Full grid, or the quick one the main job runs."""
     if quick:
         return StudyOptions(
-            cameras=ALL_CAMERAS, sides=("red", "green"), ranges_m=(2.0, 5.0, 7.0, 10.0), seeds=2, jitter_poses=1
+            cameras=ALL_CAMERAS,
+            sides=("red", "green"),
+            ranges_m=(2.0, 5.0, 7.0, 10.0),
+            currents_mA=DRIVES_MA,
+            seeds=2,
+            jitter_poses=1,
         )
     return StudyOptions(
         cameras=ALL_CAMERAS,
@@ -42,6 +50,7 @@ def default_options(quick: bool) -> StudyOptions:
         sides=("red", "green", "blue", "yellow"),
         ranges_m=tuple(float(r) for r in range(1, 11)),
         environments=("dark", "lit-room"),
+        currents_mA=DRIVES_MA,
         seeds=10,
         jitter_poses=3,
     )
@@ -50,8 +59,8 @@ def default_options(quick: bool) -> StudyOptions:
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep."""
     out = []
-    for camera, beacon, side, env, r, (foam, sheets, colour) in itertools.product(
-        o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.diffusers
+    for camera, beacon, side, env, r, current, (foam, sheets, colour) in itertools.product(
+        o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.currents_mA, o.diffusers
     ):
         out.append(
             {
@@ -61,7 +70,7 @@ def conditions(o: StudyOptions) -> list[dict]:
                 "yaw_deg": 0.0,
                 "camera": camera,
                 "environment": env,
-                "led_current_mA": float(o.currents_mA[0]),
+                "led_current_mA": float(current),
                 "foam": foam,
                 "paper_sheets": sheets,
                 "paper_colour": colour,
@@ -83,30 +92,40 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
 
 
 def analyse(frame) -> dict:
-    """Headline numbers: max range per camera and tracker, colour separability, ranking."""
+    """Headline numbers: max range per camera, drive and tracker; colour separability per
+    camera and drive; cameras ranked by their best drive's maximum range (best tracker),
+    then by that drive's colour separability."""
     summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
-    best = frame[(frame.estimator == "best")]
-    for (camera, beacon, env, tracker), g in best.groupby(["camera", "beacon", "environment", "tracker"]):
+    keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
+    for key, g in frame[frame.estimator == "best"].groupby(keys):
         mr = estimate_max_range(g.to_dict("records"))
-        summary["max_range"].append(
-            {"camera": camera, "beacon": beacon, "environment": env, "tracker": tracker, **mr.to_dict()}
-        )
+        summary["max_range"].append({**dict(zip(keys, key, strict=True)), **mr.to_dict()})
     frames = frame[(frame.tracker == "best") & (frame.estimator == "best")]  # one row per frame
-    for camera, g in frames.groupby("camera"):
-        sep = colour_separability(g)
-        summary["colour_separability"].append({"camera": camera, **sep})
-    by_camera = {}
+    for (camera, current), g in frames.groupby(["camera", "led_current_mA"]):
+        summary["colour_separability"].append({"camera": camera, "led_current_mA": current, **colour_separability(g)})
+    best: dict[str, tuple[float, float, float]] = {}  # camera -> (max range, separability, current)
     for rec in summary["max_range"]:
-        if rec["tracker"] == "best":
-            by_camera.setdefault(rec["camera"], []).append(rec["max_range_m"])
-    seps = {s["camera"]: s["min_mahalanobis"] for s in summary["colour_separability"]}
-    ranking = sorted(by_camera, key=lambda c: (-np.nanmean(by_camera[c]), -np.nan_to_num(seps.get(c, 0.0))))
+        if rec["tracker"] != "best":
+            continue
+        sep = next(
+            (
+                s["min_mahalanobis"]
+                for s in summary["colour_separability"]
+                if s["camera"] == rec["camera"] and s["led_current_mA"] == rec["led_current_mA"]
+            ),
+            None,
+        )
+        cand = (rec["max_range_m"], np.nan_to_num(sep if sep is not None else 0.0), rec["led_current_mA"])
+        if rec["camera"] not in best or cand[:2] > best[rec["camera"]][:2]:
+            best[rec["camera"]] = cand
+    ranking = sorted(best, key=lambda c: (-best[c][0], -best[c][1]))
     summary["ranking"] = [
         {
             "rank": i + 1,
             "camera": c,
-            "max_range_m": float(np.nanmean(by_camera[c])),
-            "min_colour_mahalanobis": seps.get(c),
+            "max_range_m": best[c][0],
+            "at_led_current_mA": best[c][2],
+            "min_colour_mahalanobis": best[c][1],
         }
         for i, c in enumerate(ranking)
     ]
