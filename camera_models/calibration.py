@@ -103,14 +103,15 @@ def _rotation_z_to(direction: NDArray[np.float64]) -> NDArray[np.float64]:
     return rot
 
 
-def board_poses(camera: Camera, fill: float = 0.4, tilt_deg: float = 30.0) -> list[tuple[NDArray, NDArray]]:
+def board_poses(camera: Camera, fill: float = 0.33, tilt_deg: float = 30.0) -> list[tuple[NDArray, NDArray]]:
     """20 board poses (rvec, tvec) spread over the frame, corners included, each fully inside the frame.
 
     The board spans about ``fill`` of the frame width (pinhole estimate). For each of
     the 3 × 3 image positions (centre, edge midpoints, corners) the board faces the
     camera, is tilted by ``tilt_deg`` about two different axes and rotated in-plane a
-    little, and is pushed out from the centre as far as its quiet zone stays inside
-    the frame (1 px margin); two more views sit in the centre, tilted the other ways.
+    little, and its centre is put as far toward that position as its quiet zone stays
+    inside the frame (1 px margin; searched on a 21 × 21 grid of image positions); two
+    more views sit in the centre, tilted the other ways.
     """
     g = camera.geometry
     mapping = RadialMapping(camera)
@@ -125,24 +126,30 @@ def board_poses(camera: Camera, fill: float = 0.4, tilt_deg: float = 30.0) -> li
     # neighbouring positions get the other pair of tilts; the centre gets all four
     plan = [((a, b), tilts[k + 2 * ((a + b) % 2)]) for a in (-1, 0, 1) for b in (-1, 0, 1) for k in range(2)]
     plan += [((0, 0), tilts[2]), ((0, 0), tilts[3])]
+    # candidate image positions of the board centre, and the unit ray to each
+    fu, fv = np.meshgrid(np.linspace(-0.5, 0.5, 21), np.linspace(-0.5, 0.5, 21))
+    fu, fv = fu.ravel(), fv.ravel()
+    q = mapping.undistort_points_px(np.stack([cx + fu * g.width_px, cy + fv * g.height_px], axis=-1))
+    rays = np.stack([(q[:, 0] - cx) / f, (q[:, 1] - cy) / f, np.ones(fu.size)], axis=-1)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     out = []
-    for (a, b), (tx, ty, tz) in plan:
-        r_tilt, _ = cv2.Rodrigues(np.array([tx, ty, tz]))
-        for alpha in np.linspace(1.0, 0.0, 41):
-            p = np.array([[cx + alpha * a * 0.5 * g.width_px, cy + alpha * b * 0.5 * g.height_px]])
-            q = mapping.undistort_points_px(p)[0]
-            direction = np.array([(q[0] - cx) / f, (q[1] - cy) / f, 1.0])
-            direction /= np.linalg.norm(direction)
-            rot = _rotation_z_to(direction) @ r_tilt
-            tvec = dist * direction - rot @ centre_b
-            rvec, _ = cv2.Rodrigues(rot)
-            uv = project_true(camera, rvec, tvec, outline)
-            inside = np.all(np.isfinite(uv)) and (
-                uv[:, 0].min() >= 1 and uv[:, 1].min() >= 1 and uv[:, 0].max() <= g.width_px - 2
-            )
-            if inside and uv[:, 1].max() <= g.height_px - 2:
-                out.append((rvec.reshape(3, 1), tvec.reshape(3, 1)))
-                break
+    for (a, b), tilt in plan:
+        r_tilt, _ = cv2.Rodrigues(np.array(tilt))
+        rots = np.stack([_rotation_z_to(r) @ r_tilt for r in rays])
+        tvecs = dist * rays - rots @ centre_b
+        pc = np.einsum("nij,kj->nki", rots, outline) + tvecs[:, None, :]
+        uv = mapping.distort_points_px(
+            np.stack([cx + f * pc[..., 0] / pc[..., 2], cy + f * pc[..., 1] / pc[..., 2]], axis=-1)
+        )
+        ok = np.all(pc[..., 2] > 0, axis=1) & np.all(np.isfinite(uv), axis=(1, 2))
+        ok &= (uv[..., 0].min(axis=1) >= 1) & (uv[..., 0].max(axis=1) <= g.width_px - 2)
+        ok &= (uv[..., 1].min(axis=1) >= 1) & (uv[..., 1].max(axis=1) <= g.height_px - 2)
+        if not ok.any():
+            continue
+        reach = a * fu + b * fv - 1e-3 * np.hypot(fu, fv)  # furthest toward (a, b); the centre itself for (0, 0)
+        i = int(np.argmax(np.where(ok, reach, -np.inf)))
+        rvec, _ = cv2.Rodrigues(rots[i])
+        out.append((rvec.reshape(3, 1), tvecs[i].reshape(3, 1)))
     return out
 
 
