@@ -179,7 +179,9 @@ def summary_markdown(rows: list[dict]) -> str:
         "Fraction of raw pixels at the clip level inside each marker's lit-face image (at least the",
         "1-px disc), all colour sites together: mean over the 5 markers (min-max when they differ",
         "by more than 0.01). T6: manual ISO 6400, 1/60 s; webcams: their auto exposure, metering",
-        "the whole (dark) frame. Render: 4 spp, 2× oversampling, facing target only.",
+        "the whole (dark) frame. Render: 4 spp, 2× oversampling, facing target only. With the",
+        "RGGB mosaic a red LED clips the R sites first: 0.25 ≈ R sites only, 0.75 ≈ R and G,",
+        "1.00 = every site (per-site fractions and the peak DN are in the CSV).",
         "",
     ]
 
@@ -211,17 +213,30 @@ def summary_markdown(rows: list[dict]) -> str:
             lines.append("")
     auto = [r for r in rows if r["exposure_mode"] == "auto" and r["marker"] == 1]
     if auto:
+        from camera_models.camera import load_camera
+
         lines += [
             "## Webcam auto exposure (settled values)",
+            "",
+            "Settings after the auto-exposure loop (settled: the last three frames unchanged) and",
+            "the frame mean it metered, as a fraction of clip (its target is "
+            f"{load_camera(auto[0]['camera']).exposure.target_mean:g}); 'limits' marks exposure",
+            "and gain both at their maxima.",
             "",
             "| camera | range | diffuser | drive | exposure | gain code | analog gain | metered mean | settled |",
             "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in auto:
+            cam = load_camera(r["camera"])
+            at_limits = (
+                abs(r["exposure_s"] / cam.exposure.max_exposure_s - 1) < 1e-6
+                and r["gain_code"] == cam.sensor.gain_code_max
+            )
+            state = ("yes" if r["ae_settled"] else "no") + (", limits" if at_limits else "")
             lines.append(
                 f"| {r['camera']} | {r['range_m']:g} m | {_diffuser_label(r['foam'], r['paper_sheets'])} | "
                 f"{r['led_current_mA']:g} mA | {r['exposure_s'] * 1e3:.2f} ms | {r['gain_code']} | "
-                f"{r['analog_gain']:.2f} | {r['ae_metered_mean']:.4f} | {'yes' if r['ae_settled'] else 'no'} |"
+                f"{r['analog_gain']:.2f} | {r['ae_metered_mean']:.4f} | {state} |"
             )
         lines.append("")
     return "\n".join(lines)
