@@ -180,7 +180,7 @@ def summary_markdown(rows: list[dict]) -> str:
         "1-px disc), all colour sites together: mean over the 5 markers (min-max when they differ",
         "by more than 0.01). T6: manual ISO 6400, 1/60 s; webcams: their auto exposure, metering",
         "the whole (dark) frame. Render: 4 spp, 2× oversampling, facing target only. With the",
-        "RGGB mosaic a red LED clips the R sites first: 0.25 ≈ R sites only, 0.75 ≈ R and G,",
+        "Bayer mosaic (¼ R, ½ G, ¼ B sites) a red LED clips the R sites first: 0.25 ≈ R only, 0.75 ≈ R and G,",
         "1.00 = every site (per-site fractions and the peak DN are in the CSV).",
         "",
     ]
