@@ -175,7 +175,13 @@ def marker_pixels(camera: Camera, scenario) -> NDArray[np.float64]:
 
 
 def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]:
-    """Per marker: pixels of its lit face's image (at least the 1-px disc) and the fraction clipped in the raw."""
+    """Per marker: pixels of its lit face's image (at least the 1-px disc) and the fraction clipped in the raw.
+
+    ``saturated_fraction`` counts every pixel of the core; ``saturated_fraction_cfa``
+    splits it by colour filter (R, G, B sites of the mosaic; NaN where the core has none).
+    """
+    from camera_models.sensor import cfa_channels
+
     uv = marker_pixels(camera, scenario)
     depth = scenario.camera_pose().world_to_camera(scenario.marker_positions_world_m())[:, 2]
     radius_px = np.maximum(0.5 * scenario.design.lit_face_diameter_m * camera.geometry.focal_length_px / depth, 1.0)
@@ -190,7 +196,12 @@ def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]
         uu, vv = np.meshgrid(np.arange(c0, max(c1, c0)) + cap.x0, np.arange(r0, max(r1, r0)) + cap.y0)
         core = (uu - u) ** 2 + (vv - v) ** 2 <= r * r
         n = int(core.sum())
-        frac = float(np.mean(cap.raw[r0:r1, c0:c1][core] >= clip)) if n else float("nan")
+        clipped = cap.raw[r0:r1, c0:c1][core] >= clip
+        frac = float(np.mean(clipped)) if n else float("nan")
+        ch = cfa_channels(camera.sensor.cfa, cap.x0 + c0, cap.y0 + r0, core.shape[0], core.shape[1])[core]
+        by_cfa = {
+            name: float(np.mean(clipped[ch == k])) if np.any(ch == k) else float("nan") for k, name in enumerate("RGB")
+        }
         out.append(
             {
                 "id": i + 1,
@@ -199,6 +210,7 @@ def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]
                 "core_radius_px": float(r),
                 "core_pixels": n,
                 "saturated_fraction": frac,
+                "saturated_fraction_cfa": by_cfa,
             }
         )
     return out

@@ -10,6 +10,7 @@ JPEG at the camera's quality and chroma subsampling (OpenCV/libjpeg).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import colour
 import cv2
@@ -98,13 +99,53 @@ def process(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -
         gains = auto_white_balance_gains(means, camera)
     else:
         raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
-    balanced = np.clip(rgb * gains, 0.0, 1.0)
-    lin_srgb = np.clip(balanced @ camera_to_srgb_matrix(camera).T, 0.0, 1.0)
     if isp.tone_curve != "srgb":
         raise ValueError(f"isp.tone_curve: expected srgb, got {isp.tone_curve!r}")
-    encoded = colour.cctf_encoding(lin_srgb, function="sRGB")
-    rgb8 = np.rint(np.clip(encoded, 0.0, 1.0) * 255.0).astype(np.uint8)
+    rgb *= gains
+    np.clip(rgb, 0.0, 1.0, out=rgb)
+    lin_srgb = rgb @ camera_to_srgb_matrix(camera).T
+    del rgb
+    rgb8 = srgb_encode_8bit(lin_srgb)
     return ProcessedImage(rgb8, encode_jpeg(rgb8, camera), gains)
+
+
+_LUT_BITS = 16
+
+
+@lru_cache(maxsize=1)
+def _srgb_8bit_tables() -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+    """Bin tables for :func:`srgb_encode_8bit`: code at each bin's start, and the code step inside the bin.
+
+    The 8-bit sRGB code steps up at t_k = decode((k + ½)/255), k = 0…254 (colour-science's
+    curve). [0, 1] is cut into 2¹⁶ bins, narrower than the closest two steps (3 × 10⁻⁴),
+    so a bin holds at most one step: ``base[i]`` counts the steps ≤ i/2¹⁶ and ``step[i]``
+    is the step inside bin i (∞ if none).
+    """
+    t = np.asarray(colour.cctf_decoding((np.arange(255) + 0.5) / 255.0, function="sRGB"), dtype=np.float64)
+    n = 1 << _LUT_BITS
+    starts = np.arange(n + 1) / n
+    base = np.searchsorted(t, starts[:-1], side="right")
+    step = np.full(n, np.inf)
+    inside = np.searchsorted(t, starts[1:], side="left") - base  # steps strictly inside each bin
+    assert inside.max() <= 1
+    step[inside == 1] = t[base[inside == 1]]
+    return base.astype(np.uint8), step
+
+
+def srgb_encode_8bit(linear: NDArray[np.float64]) -> NDArray[np.uint8]:
+    """round(255 · sRGB(clip(linear, 0, 1))) as uint8 (the curve's codes; ``linear`` is clipped in place).
+
+    Exactly the codes of encoding with colour-science and rounding (the curve is
+    monotonic, so a code is the number of step thresholds at or below the value), by a
+    2¹⁶-bin table and one comparison instead of a fractional power per value: 18 MP × 3
+    in under a second rather than ~7 s.
+    """
+    base, step = _srgb_8bit_tables()
+    x = np.clip(linear, 0.0, 1.0, out=linear)
+    idx = np.minimum((x * (1 << _LUT_BITS)).astype(np.int32), (1 << _LUT_BITS) - 1)
+    out = base[idx]
+    out += step[idx] <= x
+    return out
 
 
 def encode_jpeg(rgb8: NDArray[np.uint8], camera: Camera) -> bytes:

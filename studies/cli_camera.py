@@ -245,3 +245,37 @@ def capture(
         f"wrote {out}/ (image.jpg, raw.png, preview.png, capture.json): exposure {cap.exposure.exposure_s:.4g} s, "
         f"gain x{cap.exposure.analog_gain:.3g}, {100 * cap.saturated_fraction:.3f} % of pixels clipped"
     )
+
+
+@app.command("saturation-table")
+def saturation_table_cmd(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    camera: Annotated[
+        list[str] | None, typer.Option("--camera", help="Camera model (repeat for several; default all four).")
+    ] = None,
+    spp: Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")] = 4,
+    oversampling: Annotated[
+        int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")
+    ] = 2,
+    seed: SeedOpt = 0,
+) -> None:
+    """Marker-core saturation per camera, LED drive (2-20 mA) and diffuser (bare; foam + 0/1/3 sheets) at 2 m and 5 m.
+
+    V2 red side, yaw 0, dark, white paper, through render → capture. Writes
+    saturation_table.csv (one row per marker) and saturation_table.md (summary,
+    webcam auto-exposure values).
+    """
+    from camera_models.geometry import camera_names
+    from studies.saturation_table import CAMERAS, saturation_rows, summary_markdown, write_csv
+
+    cameras = tuple(camera) if camera else CAMERAS
+    for name in cameras:
+        if name not in camera_names():
+            raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    if seed < 0:
+        raise UsageError(f"seed: expected an integer >= 0, got {seed}")
+    prepare_out_dir(out)
+    rows = saturation_rows(cameras, spp=spp, oversampling=oversampling, seed=seed, progress=console.print)
+    write_csv(rows, out / "saturation_table.csv")
+    (out / "saturation_table.md").write_text(summary_markdown(rows), encoding="utf-8")
+    console.print(f"wrote {out}/saturation_table.csv ({len(rows)} rows) and saturation_table.md")

@@ -85,3 +85,15 @@ def test_bayer_pixel_sees_only_its_colour():
     cam = load_camera("canon-t6-18mm")
     qe = cam.sensor.qe_rgb @ spectra.led_shape(630.0, 20.0)
     assert qe[0] > 5 * qe[2]
+
+
+def test_srgb_8bit_table_matches_colour_science():
+    """The ISP's table-driven sRGB encoding gives exactly round(255 · sRGB(x)) of colour-science, clipped."""
+    import colour
+
+    from camera_models.isp import srgb_encode_8bit
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.uniform(-0.2, 1.2, 200_000), rng.uniform(0.0, 0.005, 100_000), np.linspace(0, 1, 100_001)])
+    ref = np.rint(colour.cctf_encoding(np.clip(x, 0.0, 1.0), function="sRGB") * 255.0).astype(np.uint8)
+    assert np.array_equal(srgb_encode_8bit(x.copy()), ref)
