@@ -139,7 +139,7 @@ def e2e_detection_command(
         bool | None,
         typer.Option(
             "--full-frame-check/--no-full-frame-check",
-            help="Also detect on one full 18 MP frame (3 m, 15°), compare with the crop (default: not with --quick).",
+            help="Also detect on one full 18 MP frame (2 m, 15°), compare with the crop (default: not with --quick).",
         ),
     ] = None,
 ) -> None:
