@@ -54,7 +54,7 @@ def evaluate_detection(image_bgr, camera_name: str, truth: dict, **detect_kwargs
         true side), ``numbering_correct`` (every marker's nearest true marker has its
         id, within half the smallest true marker spacing), ``marker_errors_px`` (per
         marker, to the true marker of the same id), ``centroid_rms_px``,
-        ``range_m``, ``range_error_m``, ``yaw_deg``, ``yaw_error_deg``, ``reason``.
+        ``range_m``, ``range_error_m``, ``yaw_deg``, ``yaw_error_deg``, ``reason``, ``notes`` (the detector's).
     """
     uv_true = _truth_markers(truth)
     range_true = _truth_value(truth, "range_m")
@@ -73,6 +73,7 @@ def evaluate_detection(image_bgr, camera_name: str, truth: dict, **detect_kwargs
         "yaw_deg": det["yaw_deg"],
         "yaw_error_deg": None,
         "reason": det["reason"],
+        "notes": list(det["notes"]),
     }
     if not det["markers"]:
         out["numbering_correct"] = False

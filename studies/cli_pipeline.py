@@ -123,3 +123,52 @@ def calibrate_command(
         f"wrote {out}: {cal.n_images} of {len(images)} views, RMS {cal.rms_px:.3f} px, "
         f"fx {k[0, 0]:.1f}, fy {k[1, 1]:.1f}, cx {k[0, 2]:.1f}, cy {k[1, 2]:.1f} px"
     )
+
+
+@app.command("e2e-detection")
+def e2e_detection_command(
+    out: Annotated[Path, typer.Option("--out", help="Output directory (CSV tables, summary.md, config.json).")],
+    seeds: Annotated[
+        int | None,
+        typer.Option("--seeds", help="Sensor-noise seeds per condition, 0..N-1 (default 3; 1 with --quick)."),
+    ] = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Ranges 1, 3, 5 m × yaws 0, 15, 30° and one seed (unless --seeds).")
+    ] = False,
+    full_frame_check: Annotated[
+        bool | None,
+        typer.Option(
+            "--full-frame-check/--no-full-frame-check",
+            help="Also detect on one full 18 MP frame (2 m, 15°), compare with the crop (default: not with --quick).",
+        ),
+    ] = None,
+) -> None:
+    """Issue 5's end-to-end table: T6 + 18 mm captures of the V2 red side, 1-5 m × 0-30°, both trackers × estimators."""
+    from studies.e2e_detection import (
+        QUICK_RANGES_M,
+        QUICK_YAWS_DEG,
+        RANGES_M,
+        YAWS_DEG,
+        E2EConfig,
+        run_e2e,
+        write_outputs,
+    )
+    from studies.e2e_detection import full_frame_check as run_full_frame_check
+
+    n_seeds = seeds if seeds is not None else (1 if quick else 3)
+    if n_seeds < 1:
+        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    prepare_out_dir(out)
+    console = Console(stderr=True)
+    config = E2EConfig()
+    console.print(config.describe())
+    ranges, yaws = (QUICK_RANGES_M, QUICK_YAWS_DEG) if quick else (RANGES_M, YAWS_DEG)
+    result = run_e2e(ranges, yaws, range(n_seeds), config, progress=console.print)
+    if full_frame_check if full_frame_check is not None else not quick:
+        import time
+
+        t0 = time.perf_counter()
+        result.full_frame_check = run_full_frame_check(config)
+        result.seconds["full_frame_check"] = time.perf_counter() - t0
+    paths = write_outputs(result, out)
+    console.print(f"wrote {', '.join(str(p) for p in paths.values())} in {result.seconds['total']:.0f} s")
