@@ -35,7 +35,10 @@ def demosaic(linear: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) ->
     code = getattr(cv2, f"COLOR_Bayer{_PATTERN_NAMES[tile]}2BGR")
     as16 = np.rint(np.clip(linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
     bgr = cv2.cvtColor(as16, code)
-    return bgr[..., ::-1].astype(np.float64) / 65535.0
+    del as16
+    rgb = bgr[..., ::-1].astype(np.float32)
+    rgb *= np.float32(1.0 / 65535.0)
+    return rgb
 
 
 def daylight_gains(camera: Camera) -> NDArray[np.float64]:
@@ -89,7 +92,10 @@ class ProcessedImage:
 def process(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -> ProcessedImage:
     """Run the camera's ISP on a raw mosaic whose top-left pixel sits at (x0, y0) in the frame."""
     s, isp = camera.sensor, camera.isp
-    linear = (raw.astype(np.float64) - s.black_level_DN) / (s.white_level_DN - s.black_level_DN)
+    # float32 and, after demosaicing, in blocks of rows: a full T6 frame is 18 M pixels
+    linear = raw.astype(np.float32)
+    linear -= np.float32(s.black_level_DN)
+    linear *= np.float32(1.0 / (s.white_level_DN - s.black_level_DN))
     rgb = demosaic(linear, s.cfa, x0, y0)
     if isp.white_balance == "daylight":
         gains = daylight_gains(camera)
@@ -101,11 +107,15 @@ def process(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -
         raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
     if isp.tone_curve != "srgb":
         raise ValueError(f"isp.tone_curve: expected srgb, got {isp.tone_curve!r}")
-    rgb *= gains
-    np.clip(rgb, 0.0, 1.0, out=rgb)
-    lin_srgb = rgb @ camera_to_srgb_matrix(camera).T
+    matrix_t = camera_to_srgb_matrix(camera).T.astype(np.float32)
+    gains32 = np.asarray(gains, dtype=np.float32)
+    rgb8 = np.empty(rgb.shape, dtype=np.uint8)
+    for r0 in range(0, rgb.shape[0], 256):
+        block = rgb[r0 : r0 + 256]
+        block *= gains32
+        np.clip(block, 0.0, 1.0, out=block)
+        rgb8[r0 : r0 + 256] = srgb_encode_8bit(block @ matrix_t)
     del rgb
-    rgb8 = srgb_encode_8bit(lin_srgb)
     return ProcessedImage(rgb8, encode_jpeg(rgb8, camera), gains)
 
 

@@ -67,11 +67,17 @@ def fixed_pattern_normal(sensor: SensorModel, x0: int, y0: int, height: int, wid
 
 
 @lru_cache(maxsize=8)
-def _fixed_pattern(seed: int, x0: int, y0: int, height: int, width: int, stream: int) -> NDArray[np.float64]:
-    y, x = np.meshgrid(
-        np.arange(y0, y0 + height, dtype=np.int64), np.arange(x0, x0 + width, dtype=np.int64), indexing="ij"
-    )
-    out = math.sqrt(2.0) * special.erfinv(2.0 * _hash_uniform(x, y, seed, stream) - 1.0)
+def _fixed_pattern(seed: int, x0: int, y0: int, height: int, width: int, stream: int) -> NDArray[np.float32]:
+    # float32 and in blocks of rows: a full 18 MP frame's pattern is 72 MB, its 64-bit
+    # hashing temporaries would be several times that at once
+    out = np.empty((height, width), dtype=np.float32)
+    xs = np.arange(x0, x0 + width, dtype=np.int64)[None, :]
+    for r0 in range(0, height, 256):
+        ys = np.arange(y0 + r0, y0 + min(r0 + 256, height), dtype=np.int64)[:, None]
+        u = _hash_uniform(
+            np.broadcast_to(xs, (ys.shape[0], width)), np.broadcast_to(ys, (ys.shape[0], width)), seed, stream
+        )
+        out[r0 : r0 + ys.shape[0]] = math.sqrt(2.0) * special.erfinv(2.0 * u - 1.0)
     out.setflags(write=False)
     return out
 
@@ -106,7 +112,7 @@ def bloom(electrons: NDArray[np.float64], full_well_e: float, fraction: float, p
     in turn; what does not spill goes to the anti-blooming drain. Charge spilled over the
     crop's edge is lost.
     """
-    e = electrons.astype(np.float64, copy=True)
+    e = electrons.astype(np.float32, copy=True)
     for _ in range(passes):
         excess = np.clip(e - full_well_e, 0.0, None)
         if not np.any(excess):
@@ -147,20 +153,29 @@ def expose(
     settings.validate()
     h, w = mean_electrons.shape
     rng = np.random.Generator(np.random.PCG64(seed))
-    prnu = 1.0 + sensor.prnu_fraction * fixed_pattern_normal(sensor, x0, y0, h, w, stream=1)
-    dark_rate = sensor.dark_current_e_per_s * np.clip(
-        1.0 + sensor.dsnu_dark_current_fraction * fixed_pattern_normal(sensor, x0, y0, h, w, stream=2), 0.0, None
-    )
-    mu = np.clip(mean_electrons, 0.0, None) * prnu + dark_rate * settings.exposure_s
-    electrons = rng.poisson(mu).astype(np.float64)
+    f32 = np.float32
+    # float32 and in place throughout: a full T6 frame is 18 M pixels (72 MB per array)
+    mu = np.clip(mean_electrons, 0.0, None).astype(f32)
+    mu *= 1.0 + f32(sensor.prnu_fraction) * fixed_pattern_normal(sensor, x0, y0, h, w, stream=1)
+    dark = fixed_pattern_normal(sensor, x0, y0, h, w, stream=2) * f32(sensor.dsnu_dark_current_fraction)
+    dark += 1.0
+    np.clip(dark, 0.0, None, out=dark)
+    mu += dark * f32(sensor.dark_current_e_per_s * settings.exposure_s)
+    del dark
+    electrons = rng.poisson(mu).astype(f32)
+    del mu
     electrons = bloom(electrons, sensor.full_well_e, sensor.blooming_fraction)
     pre, post = sensor.read_noise_split()
-    electrons += rng.normal(0.0, pre, size=(h, w))
+    electrons += rng.standard_normal((h, w), dtype=f32) * f32(pre)
     K = sensor.K_DN_per_e(settings.analog_gain)
     row_sd = post * math.sqrt(sensor.row_noise_fraction)
     pix_sd = post * math.sqrt(1.0 - sensor.row_noise_fraction)
-    dn = electrons * K + rng.normal(0.0, pix_sd, size=(h, w)) + rng.normal(0.0, row_sd, size=(h, 1))
-    dn += sensor.black_level_DN + sensor.dsnu_offset_DN * fixed_pattern_normal(sensor, x0, y0, h, w, stream=3)
+    dn = electrons
+    dn *= f32(K)
+    dn += rng.standard_normal((h, w), dtype=f32) * f32(pix_sd)
+    dn += rng.standard_normal((h, 1), dtype=f32) * f32(row_sd)
+    dn += f32(sensor.black_level_DN)
+    dn += f32(sensor.dsnu_offset_DN) * fixed_pattern_normal(sensor, x0, y0, h, w, stream=3)
     top = min(sensor.white_level_DN, 2**sensor.adc_bits - 1)
     return np.clip(np.rint(dn), 0, top).astype(np.uint16)
 
