@@ -70,3 +70,137 @@ def two_stage_vs_brute_force(target_rms: float = 0.01, passes: int = 16, brute_s
         "ratio": t_brute / (t_two + precompute_s),
         "ratio_cached": t_brute / t_two,
     }
+
+
+# -- render reuse, full frame, workers, Dask, variant ----------------------------------------
+BENCH_SCENARIO = {"beacon": "v2", "side": "red", "range_m": 5.0, "yaw_deg": 10.0, "camera": "canon-t6-18mm",
+                  "environment": "dark", "foam": True, "paper_sheets": 1, "paper_colour": "matched"}
+
+
+def reuse_vs_rerender(frames: int = 100, rerendered: int = 4) -> dict:
+    """A sweep of ``frames`` frames over LED drive, ISO and noise seed, with the render
+    reused (rendered once, scaled by linearity) versus re-rendered for every frame.
+
+    Both time render + camera (optics, sensor, ISP, JPEG) per frame. The re-rendering
+    side runs ``rerendered`` frames and scales to ``frames`` (each costs the same render).
+    """
+    from camera_models.camera import load_camera
+    from camera_models.capture import capture
+    from camera_models.exposure import manual_exposure
+    from scenes.render import render
+    from scenes.scenario import RenderSettings, Scenario
+
+    settings = RenderSettings(spp=4, oversampling=2, crop="beacon")
+    camera = load_camera(BENCH_SCENARIO["camera"])
+    currents, isos = (2.0, 5.0, 10.0, 20.0), (800.0, 1600.0, 3200.0, 6400.0)
+    grid = [(currents[i % 4], isos[(i // 4) % 4], i) for i in range(frames)]
+    render(Scenario(**BENCH_SCENARIO, render=settings))  # compile kernels and near field once, untimed
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = RenderCache(Path(tmp))
+        t0 = time.perf_counter()
+        for current, iso, seed in grid:
+            radiance = render(Scenario(**BENCH_SCENARIO, led_current_mA=current, render=settings), cache)
+            capture(radiance, camera, seed, None, manual_exposure(camera, iso=iso), full=False)
+        reuse_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for current, iso, seed in grid[:rerendered]:
+        radiance = render(Scenario(**BENCH_SCENARIO, led_current_mA=current, render=settings), None)
+        capture(radiance, camera, seed, None, manual_exposure(camera, iso=iso), full=False)
+    rerender_s = (time.perf_counter() - t0) * frames / rerendered
+    return {"frames": frames, "reuse_s": reuse_s, "rerender_s": rerender_s, "rerender_frames_timed": rerendered,
+            "ratio": rerender_s / reuse_s}
+
+
+def frame_vs_memcpy(repeats: int = 3) -> dict:
+    """One full T6 frame through optics, sensor, ISP (JPEG) and both detectors, versus a
+    plain copy of the same frame's bytes (18 MP × 3 × 8 bit)."""
+    import cv2
+    import numpy as np
+
+    from camera_models.camera import load_camera
+    from camera_models.capture import capture
+    from pipeline.detect import detect
+    from scenes.render import render
+    from scenes.scenario import RenderSettings, Scenario
+
+    scenario = Scenario(**BENCH_SCENARIO, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
+    camera = load_camera(scenario.camera)
+    radiance = render(scenario)
+    stages = {"camera_s": [], "decode_s": [], "detect_s": []}
+    for seed in range(repeats):
+        t0 = time.perf_counter()
+        cap = capture(radiance, camera, seed, None, full=True)
+        t1 = time.perf_counter()
+        image = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)
+        t2 = time.perf_counter()
+        for tracker in ("thesis", "best"):
+            detect(image, scenario.camera, tracker=tracker, estimator="best")
+        t3 = time.perf_counter()
+        for k, v in zip(stages, (t1 - t0, t2 - t1, t3 - t2), strict=True):
+            stages[k].append(v)
+    frame = np.ascontiguousarray(cap.image.rgb8)
+    copies = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        frame.copy()
+        copies.append(time.perf_counter() - t0)
+    per_frame = float(np.median([sum(x) for x in zip(*stages.values(), strict=True)]))
+    memcpy = float(np.median(copies))
+    return {"frame_s": per_frame, "memcpy_s": memcpy, "ratio": per_frame / memcpy,
+            **{k: float(np.median(v)) for k, v in stages.items()}, "frame_bytes": int(frame.nbytes)}
+
+
+def _sweep_tasks(n: int) -> list[dict]:
+    from studies.common import RENDER
+
+    return [{"scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "camera_height_m": 0.0},
+             "render": dict(RENDER), "seed": s, "trackers": ["best"], "estimators": ["best"]} for s in range(n)]
+
+
+def workers_and_dask(tasks: int = 16) -> dict:
+    """Study throughput: the same frame tasks (render cached beforehand) with 1 and 2
+    local workers, and on a 2-worker Dask LocalCluster."""
+    from studies.frame import simulate_frame
+    from studies.runner import run_tasks
+
+    work = _sweep_tasks(tasks)
+    simulate_frame(work[0])  # render and near field into the cache, untimed
+    times = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, kwargs in (("workers_1", {"workers": 1}), ("workers_2", {"workers": 2})):
+            t0 = time.perf_counter()
+            run_tasks(work, Path(tmp) / label, progress=False, **kwargs)
+            times[label] = time.perf_counter() - t0
+        from dask.distributed import LocalCluster
+
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+            t0 = time.perf_counter()
+            run_tasks(work, Path(tmp) / "dask", scheduler=cluster.scheduler_address, progress=False)
+            times["dask_2"] = time.perf_counter() - t0
+    return {"tasks": tasks, **{f"{k}_s": v for k, v in times.items()},
+            "workers_2_vs_1": times["workers_1"] / times["workers_2"],
+            "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0}
+
+
+def variant_ratio() -> dict:
+    """The same small render with the active (LLVM/CUDA) variant and the scalar one, each
+    in its own process (a process keeps one backend)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import time; from scenes.render import render; from scenes.scenario import Scenario, RenderSettings;"
+            "from scenes.mitsuba_variant import select_variant; v = select_variant().variant;"
+            "s = Scenario(range_m=8.0, render=RenderSettings(spp=2, oversampling=1, crop='target'));"
+            "render(s, groups=['led:red']); t = time.perf_counter(); render(s, groups=['led:red']);"
+            "print(v, time.perf_counter() - t)")
+    out = {}
+    for backend in ("", "scalar"):
+        env = {**os.environ, "BEACON_SIM_VARIANT": backend} if backend else dict(os.environ)
+        env.pop("BEACON_SIM_VARIANT", None) if not backend else None
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=900)
+        if proc.returncode != 0:
+            raise RuntimeError(f"variant benchmark ({backend or 'default'}) failed: {proc.stderr.strip()[-300:]}")
+        name, seconds = proc.stdout.split()[-2:]
+        out["scalar" if backend else "fast"] = {"variant": name, "seconds": float(seconds)}
+    return {**out, "ratio": out["scalar"]["seconds"] / out["fast"]["seconds"]}
