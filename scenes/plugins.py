@@ -84,8 +84,8 @@ def _marker_face_class():
             cos_theta = dr.dot(ds.n, -ds.d)
             ok = active & (cos_theta > 0.0) & (ds.pdf > 0.0)
             ds.pdf = dr.select(ok, ds.pdf, 0.0)
-            ds.emitter = mi.EmitterPtr(self)
-            weight = dr.select(ok, self._emitted(cos_theta, ds.uv) / ds.pdf, 0.0)
+            ds.emitter = mi.EmitterPtr(self) if hasattr(mi, "EmitterPtr") else self  # scalar: plain pointer
+            weight = dr.select(ok, self._emitted(cos_theta, ds.uv) / dr.maximum(ds.pdf, 1e-30), 0.0)
             return ds, mi.Spectrum(weight)
 
         def pdf_direction(self, it, ds, active=True):

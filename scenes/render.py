@@ -144,6 +144,24 @@ def render_unit_groups(spec: dict, spp: int, seed: int, groups: Sequence[str] | 
     """
     import mitsuba as mi
 
+    wanted = [(i, g) for i, g in enumerate(emitter_groups(spec)) if groups is None or g in groups]
+    out: dict[str, np.ndarray] = {}
+    if mi.variant().startswith("scalar"):
+        # no kernel to reuse in scalar mode, and Python plugins' parameters cannot be
+        # updated there: load one scene per group with only that group's emitters
+        for index, group in wanted:
+            only = {
+                **spec,
+                "shapes": [
+                    {k: v for k, v in sh.items() if k != "emitter"}
+                    if "emitter" in sh and sh["emitter"]["group"] != group
+                    else sh
+                    for sh in spec["shapes"]
+                ],
+            }
+            image = np.asarray(mi.render(mi.load_dict(to_mitsuba(only, spp)), seed=seed * 7919 + index, spp=spp))
+            out[group] = np.ascontiguousarray(image.mean(axis=-1), dtype=np.float32)
+        return out
     scene = mi.load_dict(to_mitsuba(spec, spp))
     params = mi.traverse(scene)
     by_group: dict[str, list[tuple[str, float]]] = {}
@@ -152,10 +170,7 @@ def render_unit_groups(spec: dict, spp: int, seed: int, groups: Sequence[str] | 
             prefix = f"shape_{i:04d}.emitter.radiance"
             key = prefix if prefix in params else f"{prefix}.value"
             by_group.setdefault(shape["emitter"]["group"], []).append((key, shape["emitter"]["radiance"]))
-    out: dict[str, np.ndarray] = {}
-    for index, group in enumerate(emitter_groups(spec)):
-        if groups is not None and group not in groups:
-            continue
+    for index, group in wanted:
         for other, entries in by_group.items():
             for key, value in entries:
                 params[key] = value if other == group else 0.0

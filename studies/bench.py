@@ -73,8 +73,17 @@ def two_stage_vs_brute_force(target_rms: float = 0.01, passes: int = 16, brute_s
 
 
 # -- render reuse, full frame, workers, Dask, variant ----------------------------------------
-BENCH_SCENARIO = {"beacon": "v2", "side": "red", "range_m": 5.0, "yaw_deg": 10.0, "camera": "canon-t6-18mm",
-                  "environment": "dark", "foam": True, "paper_sheets": 1, "paper_colour": "matched"}
+BENCH_SCENARIO = {
+    "beacon": "v2",
+    "side": "red",
+    "range_m": 5.0,
+    "yaw_deg": 10.0,
+    "camera": "canon-t6-18mm",
+    "environment": "dark",
+    "foam": True,
+    "paper_sheets": 1,
+    "paper_colour": "matched",
+}
 
 
 def reuse_vs_rerender(frames: int = 100, rerendered: int = 4) -> dict:
@@ -107,8 +116,13 @@ def reuse_vs_rerender(frames: int = 100, rerendered: int = 4) -> dict:
         radiance = render(Scenario(**BENCH_SCENARIO, led_current_mA=current, render=settings), None)
         capture(radiance, camera, seed, None, manual_exposure(camera, iso=iso), full=False)
     rerender_s = (time.perf_counter() - t0) * frames / rerendered
-    return {"frames": frames, "reuse_s": reuse_s, "rerender_s": rerender_s, "rerender_frames_timed": rerendered,
-            "ratio": rerender_s / reuse_s}
+    return {
+        "frames": frames,
+        "reuse_s": reuse_s,
+        "rerender_s": rerender_s,
+        "rerender_frames_timed": rerendered,
+        "ratio": rerender_s / reuse_s,
+    }
 
 
 def frame_vs_memcpy(repeats: int = 3) -> dict:
@@ -146,15 +160,28 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
         copies.append(time.perf_counter() - t0)
     per_frame = float(np.median([sum(x) for x in zip(*stages.values(), strict=True)]))
     memcpy = float(np.median(copies))
-    return {"frame_s": per_frame, "memcpy_s": memcpy, "ratio": per_frame / memcpy,
-            **{k: float(np.median(v)) for k, v in stages.items()}, "frame_bytes": int(frame.nbytes)}
+    return {
+        "frame_s": per_frame,
+        "memcpy_s": memcpy,
+        "ratio": per_frame / memcpy,
+        **{k: float(np.median(v)) for k, v in stages.items()},
+        "frame_bytes": int(frame.nbytes),
+    }
 
 
 def _sweep_tasks(n: int) -> list[dict]:
     from studies.common import RENDER
 
-    return [{"scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "camera_height_m": 0.0},
-             "render": dict(RENDER), "seed": s, "trackers": ["best"], "estimators": ["best"]} for s in range(n)]
+    return [
+        {
+            "scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "camera_height_m": 0.0},
+            "render": dict(RENDER),
+            "seed": s,
+            "trackers": ["best"],
+            "estimators": ["best"],
+        }
+        for s in range(n)
+    ]
 
 
 def workers_and_dask(tasks: int = 16) -> dict:
@@ -177,9 +204,12 @@ def workers_and_dask(tasks: int = 16) -> dict:
             t0 = time.perf_counter()
             run_tasks(work, Path(tmp) / "dask", scheduler=cluster.scheduler_address, progress=False)
             times["dask_2"] = time.perf_counter() - t0
-    return {"tasks": tasks, **{f"{k}_s": v for k, v in times.items()},
-            "workers_2_vs_1": times["workers_1"] / times["workers_2"],
-            "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0}
+    return {
+        "tasks": tasks,
+        **{f"{k}_s": v for k, v in times.items()},
+        "workers_2_vs_1": times["workers_1"] / times["workers_2"],
+        "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0,
+    }
 
 
 def variant_ratio() -> dict:
@@ -189,11 +219,13 @@ def variant_ratio() -> dict:
     import subprocess
     import sys
 
-    code = ("import time; from scenes.render import render; from scenes.scenario import Scenario, RenderSettings;"
-            "from scenes.mitsuba_variant import select_variant; v = select_variant().variant;"
-            "s = Scenario(range_m=8.0, render=RenderSettings(spp=2, oversampling=1, crop='target'));"
-            "render(s, groups=['led:red']); t = time.perf_counter(); render(s, groups=['led:red']);"
-            "print(v, time.perf_counter() - t)")
+    code = (
+        "import time; from scenes.render import render; from scenes.scenario import Scenario, RenderSettings;"
+        "from scenes.mitsuba_variant import select_variant; v = select_variant().variant;"
+        "s = Scenario(range_m=8.0, render=RenderSettings(spp=2, oversampling=1, crop='target'));"
+        "render(s, groups=['led:red']); t = time.perf_counter(); render(s, groups=['led:red']);"
+        "print(v, time.perf_counter() - t)"
+    )
     out = {}
     for backend in ("", "scalar"):
         env = {**os.environ, "BEACON_SIM_VARIANT": backend} if backend else dict(os.environ)
