@@ -303,20 +303,50 @@ def optical_image(
         raise ValueError(f"exposure_s: expected a time > 0 s, got {exposure_s!r}")
     n = camera.lens.f_number if f_number is None else check_f_number(f_number)
     grid = radiance.grid
-    s = grid.oversampling
-    qe = camera.sensor.qe_rgb
     factor = camera_equation_factor_m2_sr(camera.lens, n, camera.pixel_area_m2) * exposure_s
     u, v = grid.subpixel_centres_px()
-    ri = relative_illumination(camera, n, u[None, :], v[:, None])
+    ri = None
+
+    def illumination():
+        nonlocal ri
+        if ri is None:
+            ri = relative_illumination(camera, n, u[None, :], v[:, None])
+        return ri
+
     out = np.zeros((grid.height, grid.width, 3))
     for comp in radiance.components:
         if comp.spectral_shape_per_nm is None or not np.any(comp.image_W_m2_sr):
             continue
-        image = distortion_resample(comp.image_W_m2_sr, grid, camera)
-        e_per_j = electrons_per_joule(comp.spectral_shape_per_nm, qe)
-        for c in range(3):
-            weight = comp.spectral_shape_per_nm * qe[c] * spectra.WAVELENGTHS_NM
-            blurred = signal.fftconvolve(image, psf_kernel(camera, n, weight, s), mode="same")
-            binned = (np.clip(blurred, 0.0, None) * ri).reshape(grid.height, s, grid.width, s).mean(axis=(1, 3))
-            out[..., c] += binned * factor * e_per_j[c]
+        if comp.unit_key is not None and comp.unit_image is not None:
+            # linear in radiance: the lens's work on the unit render is done once and rescaled
+            cache_key = (comp.unit_key, camera.name, n, grid)
+            binned = _UNIT_OPTICS.get(cache_key)
+            if binned is None:
+                binned = _lens_image(comp.unit_image, comp.spectral_shape_per_nm, grid, camera, n, illumination())
+                _UNIT_OPTICS[cache_key] = binned
+                while len(_UNIT_OPTICS) > 32:
+                    _UNIT_OPTICS.pop(next(iter(_UNIT_OPTICS)))
+            out += binned * (comp.scale * factor)
+        else:
+            out += _lens_image(comp.image_W_m2_sr, comp.spectral_shape_per_nm, grid, camera, n, illumination()) * factor
     return OpticalImage(out, grid.x0, grid.y0)
+
+
+_UNIT_OPTICS: dict[tuple, NDArray[np.float64]] = {}
+"""Lens images of unit renders (see :func:`optical_image`), most recent 32."""
+
+
+def _lens_image(image, shape_per_nm, grid, camera: Camera, n: float, ri) -> NDArray[np.float64]:
+    """Distortion, PSF per channel, relative illumination and binning of one radiance
+    image: (height, width, 3) electrons per pixel per unit of the camera-equation factor."""
+    s = grid.oversampling
+    qe = camera.sensor.qe_rgb
+    image = distortion_resample(image, grid, camera)
+    e_per_j = electrons_per_joule(shape_per_nm, qe)
+    out = np.empty((grid.height, grid.width, 3))
+    for c in range(3):
+        weight = shape_per_nm * qe[c] * spectra.WAVELENGTHS_NM
+        blurred = signal.fftconvolve(image, psf_kernel(camera, n, weight, s), mode="same")
+        out[..., c] = (np.clip(blurred, 0.0, None) * ri).reshape(grid.height, s, grid.width, s).mean(axis=(1, 3))
+        out[..., c] *= e_per_j[c]
+    return out

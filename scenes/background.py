@@ -53,5 +53,7 @@ def render_background(
         unit = render_unit_groups(spec, spp, seed)
         if cache is not None:
             cache.store(key, unit)
-    components = tuple(_scaled_component(scenario, group, image) for group, image in sorted(unit.items()))
+    components = tuple(
+        _scaled_component(scenario, group, image, f"{key}:{group}") for group, image in sorted(unit.items())
+    )
     return SpectralRadiance(grid, components, scenario.to_dict(), variant, from_cache)

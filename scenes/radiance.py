@@ -84,15 +84,22 @@ class RadianceComponent:
         Radiance integrated over wavelength, W·m⁻²·sr⁻¹, shape ``PixelGrid.shape``.
     spectral_shape_per_nm
         Normalised emission spectrum on ``WAVELENGTHS_NM``, nm⁻¹.
+    unit_key, unit_image, scale
+        When the image is a cached unit render times ``scale`` (LED drive, ambient
+        level), the unit image and a key naming it (render key and group), so later
+        linear stages can do their work once per unit image and rescale.
     """
 
     name: str
     image_W_m2_sr: NDArray[np.float32]
     spectral_shape_per_nm: NDArray[np.float64]
+    unit_key: str | None = None
+    unit_image: NDArray[np.float32] | None = None
+    scale: float = 1.0
 
     def scaled(self, factor: float) -> RadianceComponent:
         """This component with its radiance multiplied by ``factor``."""
-        return replace(self, image_W_m2_sr=(self.image_W_m2_sr * np.float32(factor)))
+        return replace(self, image_W_m2_sr=(self.image_W_m2_sr * np.float32(factor)), scale=self.scale * factor)
 
 
 @dataclass(frozen=True)

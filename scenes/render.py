@@ -99,11 +99,13 @@ def render(
         log.info("rendered %s in %.1f s (%s)", list(unit), time.perf_counter() - t0, variant)
         if cache is not None:
             cache.store(key, unit)
-    components = tuple(_scaled_component(scenario, group, image) for group, image in sorted(unit.items()))
+    components = tuple(
+        _scaled_component(scenario, group, image, f"{key}:{group}") for group, image in sorted(unit.items())
+    )
     return SpectralRadiance(pixel_grid(scenario), components, scenario.to_dict(), variant, from_cache)
 
 
-def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray) -> RadianceComponent:
+def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, unit_key: str) -> RadianceComponent:
     """Scale a unit render to the scenario's LED drive or ambient level."""
     if group == "ambient":
         env = scenario.env
@@ -119,7 +121,11 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray) ->
         transmitted = spectra.integrate_nm(exit_spectrum)
         factor = led.radiant_intensity_W_sr(side_current_mA(scenario, side)) * transmitted
         shape = exit_spectrum / transmitted if transmitted > 0 else led.spectral_shape
-    return RadianceComponent(group, (unit_image * np.float32(factor)).astype(np.float32), shape)
+    unit_image = np.asarray(unit_image, dtype=np.float32)
+    unit_image.setflags(write=False)
+    return RadianceComponent(
+        group, (unit_image * np.float32(factor)).astype(np.float32), shape, unit_key, unit_image, float(factor)
+    )
 
 
 def side_current_mA(scenario: Scenario, side: str) -> float:
