@@ -31,6 +31,8 @@ log = logging.getLogger("beacon_sim")
 
 MIN_LLVM_MAJOR = 16
 ENV_OVERRIDE = "BEACON_SIM_VARIANT"
+ENV_THREADS = "BEACON_SIM_THREADS"
+"""Threads of the LLVM backend in this process (set by the sweep runner for its workers)."""
 
 _LLVM_GLOBS = (
     "/usr/lib/x86_64-linux-gnu/libLLVM*.so*",
@@ -125,6 +127,12 @@ def select_variant(mode: str = "mono") -> VariantChoice:
         variant = forced_variant or _VARIANTS[(backend, mode)]
         _active = VariantChoice(backend, variant, reason)
         log.info("Mitsuba variant %s: %s", variant, reason)
+        threads = os.environ.get(ENV_THREADS, "").strip()
+        if threads and backend == "llvm":
+            import drjit as dr
+
+            # a sweep's worker processes share the cores instead of each taking all of them
+            dr.set_thread_count(max(1, int(threads)))
     else:
         variant = _VARIANTS[(_active.backend, mode)]
     import mitsuba as mi

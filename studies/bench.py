@@ -169,46 +169,76 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
     }
 
 
-def _sweep_tasks(n: int) -> list[dict]:
+def _sweep_tasks(n: int, render_seed: int) -> list[dict]:
+    """``n`` study frame tasks, each a distinct pose (its own render), as in a range sweep."""
     from studies.common import RENDER
 
     return [
         {
-            "scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "camera_height_m": 0.0},
-            "render": dict(RENDER),
-            "seed": s,
+            "scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "range_m": 4.0 + 0.25 * k},
+            "render": {**RENDER, "seed": render_seed},
+            "seed": 0,
             "trackers": ["best"],
             "estimators": ["best"],
         }
-        for s in range(n)
+        for k in range(n)
     ]
 
 
-def workers_and_dask(tasks: int = 16) -> dict:
-    """Study throughput: the same frame tasks (render cached beforehand) with 1 and 2
-    local workers, and on a 2-worker Dask LocalCluster."""
+def workers_and_dask(tasks: int = 12) -> dict:
+    """Study throughput on the same kind of frame tasks — each renders its own pose — with
+    1 and 2 single-threaded local worker processes and on a 2-worker Dask LocalCluster,
+    plus one worker using every core (Dr.Jit and OpenCV threads) for comparison. Each
+    configuration uses its own render seed, so none finds another's renders in the cache;
+    the near-field marker render they share is computed beforehand (untimed)."""
+    import os
+
+    from dask.distributed import LocalCluster
+
     from studies.frame import simulate_frame
-    from studies.runner import run_tasks
+    from studies.runner import _run_pool, _worker_threads, run_tasks
 
-    work = _sweep_tasks(tasks)
-    simulate_frame(work[0])  # render and near field into the cache, untimed
+    saved = os.environ.get("BEACON_SIM_CACHE")
     times = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for label, kwargs in (("workers_1", {"workers": 1}), ("workers_2", {"workers": 2})):
-            t0 = time.perf_counter()
-            run_tasks(work, Path(tmp) / label, progress=False, **kwargs)
-            times[label] = time.perf_counter() - t0
-        from dask.distributed import LocalCluster
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            warm = _sweep_tasks(1, 0)[0]
+            simulate_frame({**warm, "scenario": {**warm["scenario"], "range_m": 20.0}})  # near field, untimed
+            from studies.runner import ResultStore, task_key
 
-        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-            t0 = time.perf_counter()
-            run_tasks(work, Path(tmp) / "dask", scheduler=cluster.scheduler_address, progress=False)
-            times["dask_2"] = time.perf_counter() - t0
+            for k, label in enumerate(("workers_1", "workers_2", "dask_2", "workers_1_all_cores")):
+                work = _sweep_tasks(tasks, render_seed=1000 + k)
+                t0 = time.perf_counter()
+                if label == "dask_2":
+                    with (
+                        _worker_threads(2, 1),
+                        LocalCluster(
+                            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+                        ) as cluster,
+                    ):
+                        run_tasks(work, Path(tmp) / label, scheduler=cluster.scheduler_address, progress=False)
+                elif label == "workers_1_all_cores":
+                    with _worker_threads(1):
+                        run_tasks(work, Path(tmp) / label, workers=1, progress=False)
+                else:
+                    n = int(label[-1])
+                    store = ResultStore(Path(tmp) / label / "tasks")
+                    pending = {task_key("studies.frame:simulate_frame", t, 2): t for t in work}
+                    with _worker_threads(n, 1):  # single-threaded worker processes
+                        _run_pool(n, "studies.frame:simulate_frame", pending, store, lambda: None, force=True)
+                times[label] = time.perf_counter() - t0
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
     return {
         "tasks": tasks,
         **{f"{k}_s": v for k, v in times.items()},
         "workers_2_vs_1": times["workers_1"] / times["workers_2"],
         "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0,
+        "all_cores_1_worker_vs_2_workers": times["workers_1_all_cores"] / times["workers_2"],
     }
 
 

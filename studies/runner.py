@@ -32,6 +32,11 @@ def resolve(function: str) -> Callable[[dict], list[dict]]:
 
 def run_one(function: str, task: dict) -> list[dict]:
     """Worker entry point (top level, so process pools and Dask can pickle it)."""
+    threads = os.environ.get("BEACON_SIM_THREADS")
+    if threads:
+        import cv2
+
+        cv2.setNumThreads(max(1, int(threads)))  # share the cores with the other workers
     return resolve(function)(task)
 
 
@@ -132,13 +137,34 @@ def run_tasks(
     return rows
 
 
-def _run_pool(workers: int, function: str, pending: dict[str, dict], store: ResultStore, advance) -> None:
-    # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked
-    with ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=get_context("spawn")) as pool:
+def _run_pool(
+    workers: int, function: str, pending: dict[str, dict], store: ResultStore, advance, force: bool = False
+) -> None:
+    # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked; each
+    # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
+    n = workers if force else min(workers, len(pending))
+    with _worker_threads(n), ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool:
         futures = {pool.submit(run_one, function, task): key for key, task in pending.items()}
         for future in as_completed(futures):
             store.put(futures[future], future.result())
             advance()
+
+
+class _worker_threads:
+    """Set BEACON_SIM_THREADS = cores / workers for processes started inside the block."""
+
+    def __init__(self, workers: int, threads: int | None = None):
+        self.value = str(threads or max(1, (os.cpu_count() or 1) // max(workers, 1)))
+
+    def __enter__(self):
+        self.saved = os.environ.get("BEACON_SIM_THREADS")
+        os.environ.setdefault("BEACON_SIM_THREADS", self.value)
+        return self
+
+    def __exit__(self, *exc):
+        if self.saved is None:
+            os.environ.pop("BEACON_SIM_THREADS", None)
+        return False
 
 
 def _run_dask(address: str, function: str, pending: dict[str, dict], store: ResultStore, advance) -> None:
