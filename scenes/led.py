@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,6 +109,7 @@ class LED:
         return 2.0 * math.pi * self.radiant_intensity_W_sr(current_mA) / (self.cos_exponent + 1.0)
 
 
+@lru_cache(maxsize=1)
 def load_leds() -> dict[str, LED]:
     """All LEDs of ``scenes/data/leds.toml``, keyed by side colour."""
     values, _ = load_sourced(DATA_DIR / "leds.toml")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -126,6 +127,17 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, un
     return RadianceComponent(
         group, (unit_image * np.float32(factor)).astype(np.float32), shape, unit_key, unit_image, float(factor)
     )
+
+
+def with_led_current(radiance: SpectralRadiance, current_mA: float) -> SpectralRadiance:
+    """The same render with the LEDs driven at ``current_mA`` (light transport is linear:
+    the unit renders are rescaled in memory; no scene is built and nothing is read)."""
+    scenario = Scenario.from_dict({**radiance.scenario, "led_current_mA": current_mA})
+    components = tuple(
+        _scaled_component(scenario, c.name, c.unit_image, c.unit_key) if c.unit_image is not None else c
+        for c in radiance.components
+    )
+    return replace(radiance, components=components, scenario=scenario.to_dict())
 
 
 def side_current_mA(scenario: Scenario, side: str) -> float:

@@ -87,3 +87,11 @@ def test_no_temporary_files_are_left_behind(tmp_path):
     render(SMALL, cache)
     leftovers = [p for p in (tmp_path / "cache").rglob("*") if p.is_file() and p.suffix == ".tmp"]
     assert leftovers == []
+
+
+def test_with_led_current_equals_a_render_at_that_current():
+    from scenes.render import with_led_current
+
+    direct = render(Scenario(**{**SMALL.__dict__, "led_current_mA": 7.0}))
+    rescaled = with_led_current(render(SMALL), 7.0)
+    assert _digest(direct) == _digest(rescaled)
