@@ -129,7 +129,14 @@ def run(
     frame = write_tables(out, rows)
     table = validation_table(frame)
     atomic_write_bytes(out / "validation.csv", table.to_csv(index=False, float_format="%.6g").encode())
-    verdicts = [v for label in ("study", "derived") for v in conclusions(table, frame, label)]
+    from pipeline.thesis_tracker import ThesisTrackerSettings
+
+    study_boxes = {c: [[list(lo), list(hi)] for lo, hi in b] for c, b in ThesisTrackerSettings().ranges().items()}
+    verdicts = [
+        v
+        for label, boxes in (("study", study_boxes), ("derived", derived))
+        for v in conclusions(table, frame, label, boxes)
+    ]
     _report(out, table, verdicts, derived)
     summary = {"study": NAME, "conclusions": verdicts, "derived_thresholds": derived}
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
@@ -189,7 +196,23 @@ def validation_table(frame):
     return pd.DataFrame(out)
 
 
-def conclusions(table, frame, thresholds: str = "study") -> list[dict]:
+def overlapping_colours(hsv: dict) -> list[str]:
+    """Pairs of colours whose HSV boxes intersect (in hue, saturation and value at once):
+    a pixel in the intersection matches both, so such thresholds cannot tell them apart."""
+
+    def meet(a, b):
+        return all(max(a[0][k], b[0][k]) <= min(a[1][k], b[1][k]) for k in range(3))
+
+    names = sorted(c for c in hsv if hsv[c])
+    return [
+        f"{a}/{b}"
+        for i, a in enumerate(names)
+        for b in names[i + 1 :]
+        if any(meet(x, y) for x in hsv[a] for y in hsv[b])
+    ]
+
+
+def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None) -> list[dict]:
     """The study's headline conclusions (THESIS_FACTS §10) against the predictions made
     with the given colour thresholds (``study``: its printed numbers; ``derived``: its
     procedure applied to the simulated preliminary captures)."""
@@ -217,10 +240,17 @@ def conclusions(table, frame, thresholds: str = "study") -> list[dict]:
         f"primary test detected fraction {prim.detected_fraction.min():.2f}-{prim.detected_fraction.max():.2f}",
     )
     det = prim[prim.detected_fraction > 0]
+    tested = set(prim.side) | set(rng.side)
+    overlap = [p for p in (overlapping_colours(hsv) if hsv else []) if tested & set(p.split("/"))]
+    evidence = (
+        f"colour correct among detections {det.colour_correct_fraction.mean():.2f}" if len(det) else "no detections"
+    )
+    if overlap:  # only the red side was tested: with overlapping boxes 'red' wins by being tried first
+        evidence += f"; but the thresholds overlap ({', '.join(overlap)}), so they cannot tell those colours apart"
     verdict(
         "…and could tell their colours",
-        bool(len(det)) and det.colour_correct_fraction.min() >= 0.9,
-        f"colour correct among detections {det.colour_correct_fraction.mean():.2f}" if len(det) else "no detections",
+        bool(len(det)) and det.colour_correct_fraction.min() >= 0.9 and not overlap,
+        evidence,
     )
     verdict(
         "The webcams over-exposed the LEDs",

@@ -119,3 +119,13 @@ def test_report_renders_in_headless_chromium(tmp_path):
     assert title.startswith("Range limit")
     assert images and all(done and width > 0 for done, width in images)
     assert errors == []
+
+
+def test_threshold_overlap_detection():
+    from pipeline.thesis_tracker import ThesisTrackerSettings
+
+    study = {c: [[list(lo), list(hi)] for lo, hi in b] for c, b in ThesisTrackerSettings().ranges().items()}
+    # red and blue share hues but not saturations; the study's blue and green boxes do meet (H 84-85, S 64-143)
+    assert validate.overlapping_colours(study) == ["blue/green"]
+    wide = {"red": [[[0, 0, 100], [179, 255, 255]]], "green": [[[60, 50, 100], [80, 255, 255]]]}
+    assert validate.overlapping_colours(wide) == ["green/red"]
