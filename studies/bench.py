@@ -225,9 +225,9 @@ def workers_and_dask(tasks: int = 12) -> dict:
                 else:
                     n = int(label[-1])
                     store = ResultStore(Path(tmp) / label / "tasks")
-                    pending = {task_key("studies.frame:simulate_frame", t, 2): t for t in work}
+                    batches = [{task_key("studies.frame:simulate_frame", t, 2): t} for t in work]
                     with _worker_threads(n, 1):  # single-threaded worker processes
-                        _run_pool(n, "studies.frame:simulate_frame", pending, store, lambda: None, force=True)
+                        _run_pool(n, "studies.frame:simulate_frame", batches, store, lambda: None, force=True)
                 times[label] = time.perf_counter() - t0
     finally:
         if saved is None:

@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
 from studies.metrics import detection_success, wilson_interval
 from studies.report import Report
-from studies.runner import run_tasks
 
 NAME = "brightness-diffuser"
 FULL_DIFFUSERS = tuple(
@@ -52,7 +51,7 @@ def default_options(quick: bool) -> StudyOptions:
         ranges_m=(3.0, 7.0),
         currents_mA=(1.0, 2.0, 5.0, 10.0, 20.0),
         diffusers=FULL_DIFFUSERS,
-        seeds=6,
+        seeds=4,
         jitter_poses=2,
     )
 
@@ -81,7 +80,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary."""
     tasks = frame_tasks(conditions(options), options, estimators=["best"])
-    rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
+    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
     frame = write_tables(out, rows)
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}

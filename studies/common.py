@@ -2,9 +2,10 @@
 
 Frames of one nominal condition differ by sensor-noise seed and by a small pose jitter
 (range ±0.5 %, yaw ±0.5°, camera height ±5 mm, drawn deterministically from the
-condition and the jitter index), so detection probabilities are not those of a single
-lucky pose. ``jitter_poses`` jittered poses are rendered per condition; seeds cycle
-over them.
+condition's geometry and the jitter index), so detection probabilities are not those of
+a single lucky pose. ``jitter_poses`` jittered poses are rendered per condition; seeds
+cycle over them. The jitter does not depend on the LED drive, so every drive of a
+condition sees the same poses: drive sweeps are paired and reuse one render per pose.
 """
 
 from __future__ import annotations
@@ -88,10 +89,12 @@ def _check_choices(name: str, values: Sequence[str], allowed: Sequence[str]) -> 
 
 
 def jitter(condition: dict, index: int) -> dict:
-    """Deterministic small pose offsets for jittered pose ``index`` of a condition (0: none)."""
+    """Deterministic small pose offsets for jittered pose ``index`` of a condition (0: none);
+    the same for every LED drive of the condition."""
     if index == 0:
         return {"range_scale": 1.0, "yaw_offset_deg": 0.0, "height_m": 0.0}
-    digest = hashlib.sha256(repr((sorted(condition.items()), index)).encode()).digest()
+    geometry = sorted((k, v) for k, v in condition.items() if k != "led_current_mA")
+    digest = hashlib.sha256(repr((geometry, index)).encode()).digest()
     u = np.frombuffer(digest[:24], dtype=np.uint64).astype(np.float64) / 2.0**64 * 2 - 1  # three in (-1, 1)
     return {"range_scale": 1.0 + 0.005 * u[0], "yaw_offset_deg": 0.5 * u[1], "height_m": 0.005 * u[2]}
 
@@ -129,6 +132,16 @@ def frame_tasks(
                 task["estimators"] = list(estimators)
             tasks.append(task)
     return tasks
+
+
+def run_frames(tasks: Sequence[dict], out: Path, **kwargs) -> list[dict]:
+    """Run frame tasks (:func:`studies.frame.simulate_frame`) with the frames of each
+    render batched into one worker; rows in task order. ``kwargs`` go to
+    :func:`studies.runner.run_tasks` (workers, scheduler, description, progress)."""
+    from studies.frame import render_batch_key
+    from studies.runner import run_tasks
+
+    return run_tasks(tasks, out, "studies.frame:simulate_frame", batch_key=render_batch_key, **kwargs)
 
 
 def write_tables(out: Path, rows: list[dict]) -> object:

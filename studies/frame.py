@@ -19,6 +19,7 @@ marker measurements that do not depend on the detector (core saturation, colour)
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -41,20 +42,11 @@ def simulate_frame(task: dict) -> list[dict]:
     """Simulate one frame task (see module docstring) and score every detector on it."""
     import cv2
 
-    from camera_models.camera import load_camera
     from camera_models.capture import capture, marker_core_saturation, marker_pixels
     from camera_models.exposure import manual_exposure
     from pipeline.evaluate import evaluate_detection
-    from scenes.background import render_background
-    from scenes.render import render
-    from scenes.render_cache import RenderCache
 
-    scenario = frame_scenario(task)
-    cache = RenderCache()
-    camera = load_camera(scenario.camera)
-    radiance = render(scenario, cache)
-    needs_background = camera.exposure.mode == "auto" or scenario.env.has_ambient
-    background = render_background(scenario, cache) if needs_background else None
+    scenario, camera, radiance, background = frame_inputs(task)
     exposure = None
     if task.get("exposure"):
         exposure = manual_exposure(camera, task["exposure"].get("exposure_s"), task["exposure"].get("iso"))
@@ -194,22 +186,53 @@ def _num(x) -> float:
     return float(x) if x is not None and np.isfinite(x) else math.nan
 
 
+def frame_inputs(task: dict):
+    """What a frame task's capture needs: (scenario, camera, render of the crop,
+    low-resolution full-frame background or None).
+
+    The background is rendered only where it is used: for automatic exposure's metering
+    and for full-frame captures. Renders of the last few geometries are kept in memory
+    at unit LED scale, so the frames of one render (drives, seeds) rescale them instead
+    of reading the cache again — light transport is linear, the bytes are the same.
+    """
+    from camera_models.camera import load_camera
+    from scenes.background import render_background
+    from scenes.render import render, with_led_current
+    from scenes.render_cache import RenderCache
+
+    scenario = frame_scenario(task)
+    camera = load_camera(scenario.camera)
+    needs_background = camera.exposure.mode == "auto" or bool(task.get("full_frame"))
+    key = json.dumps({**scenario.to_dict(), "led_current_mA": None, "background": needs_background}, sort_keys=True)
+    held = _RENDERS.pop(key, None)
+    if held is None:
+        cache = RenderCache()
+        held = (render(scenario, cache), render_background(scenario, cache) if needs_background else None)
+    _RENDERS[key] = held  # most recently used last
+    while len(_RENDERS) > 4:
+        _RENDERS.pop(next(iter(_RENDERS)))
+    radiance, background = (None if r is None else with_led_current(r, scenario.current_mA) for r in held)
+    return scenario, camera, radiance, background
+
+
+_RENDERS: dict[str, tuple] = {}
+"""Renders (crop, background) of the most recently used geometries in this process."""
+
+
+def render_batch_key(task: dict) -> str:
+    """Label of the frames that share a task's render (everything but drive and seed);
+    the runner sends them to one worker together (:func:`studies.runner.run_tasks`)."""
+    scenario = {k: v for k, v in task["scenario"].items() if k != "led_current_mA"}
+    return json.dumps([scenario, task.get("render", {}), bool(task.get("full_frame"))], sort_keys=True)
+
+
 def saved_frame(task: dict):
     """The image the camera saves for a task (decoded JPEG, BGR) and its frame origin."""
     import cv2
 
-    from camera_models.camera import load_camera
     from camera_models.capture import capture
-    from scenes.background import render_background
-    from scenes.render import render
-    from scenes.render_cache import RenderCache
 
-    scenario = frame_scenario(task)
-    cache = RenderCache()
-    camera = load_camera(scenario.camera)
-    radiance = render(scenario, cache)
-    needs_background = camera.exposure.mode == "auto" or scenario.env.has_ambient
-    background = render_background(scenario, cache) if needs_background else None
+    _, camera, radiance, background = frame_inputs(task)
     cap = capture(radiance, camera, int(task["seed"]), background, full=False)
     return cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR), (cap.x0, cap.y0)
 
@@ -219,20 +242,11 @@ def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) 
     to ``size_px`` with nearest-neighbour so camera pixels stay visible; PNG bytes."""
     import cv2
 
-    from camera_models.camera import load_camera
-    from camera_models.capture import capture, marker_pixels
-    from scenes.background import render_background
-    from scenes.render import render
-    from scenes.render_cache import RenderCache
+    from camera_models.capture import marker_pixels
 
-    scenario = frame_scenario(task)
-    cache = RenderCache()
-    camera = load_camera(scenario.camera)
-    radiance = render(scenario, cache)
-    background = render_background(scenario, cache) if camera.exposure.mode == "auto" else None
-    cap = capture(radiance, camera, int(task["seed"]), background, full=False)
-    image = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)
-    u, v = marker_pixels(camera, scenario)[0] - np.array([cap.x0, cap.y0])
+    scenario, camera, _, _ = frame_inputs(task)
+    image, (x0, y0) = saved_frame(task)
+    u, v = marker_pixels(camera, scenario)[0] - np.array([x0, y0])
     half = max(2, round(half_width_m * camera.geometry.focal_length_px / scenario.range_m))
     padded = cv2.copyMakeBorder(image, half, half, half, half, cv2.BORDER_CONSTANT, value=(0, 0, 0))
     cu, cv_ = round(u) + half, round(v) + half

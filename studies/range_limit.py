@@ -15,10 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
 from studies.max_range import estimate_max_range
 from studies.report import Report
-from studies.runner import run_tasks
 
 NAME = "range-limit"
 PLANNED_RANGE_M = 10.0
@@ -39,9 +38,9 @@ def default_options(quick: bool) -> StudyOptions:
         cameras=("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm"),
         beacons=("v1", "v2"),
         yaws_deg=(0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0),
-        ranges_m=tuple(float(r) for r in range(1, 15)),
+        ranges_m=tuple(float(r) for r in range(2, 17, 2)),  # the logistic fit interpolates between them
         currents_mA=(2.0, 20.0),
-        seeds=8,
+        seeds=6,
         jitter_poses=2,
     )
 
@@ -70,7 +69,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary (``max_range`` records)."""
     tasks = frame_tasks(conditions(options), options, estimators=["best"])
-    rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
+    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
     frame = write_tables(out, rows)
     records = []
     keys = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]

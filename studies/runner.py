@@ -7,6 +7,11 @@ point — even by SIGKILL — loses at most the tasks in flight; running it agai
 stored ones. The table is assembled from the store in the order of the task list, never
 in completion order, so an interrupted-and-resumed run, a local pool and a Dask cluster
 all produce the same table byte for byte.
+
+Tasks that share expensive state (frames of one render) can be sent to a worker
+together: ``batch_key`` labels them, and a batch runs its tasks one after another in one
+process, where the render and the lens work are computed once and kept in memory.
+Results are still stored task by task.
 """
 
 from __future__ import annotations
@@ -32,12 +37,18 @@ def resolve(function: str) -> Callable[[dict], list[dict]]:
 
 def run_one(function: str, task: dict) -> list[dict]:
     """Worker entry point (top level, so process pools and Dask can pickle it)."""
+    return run_batch(function, [task])[0]
+
+
+def run_batch(function: str, tasks: list[dict]) -> list[list[dict]]:
+    """Worker entry point for a batch: each task's rows, in order."""
     threads = os.environ.get("BEACON_SIM_THREADS")
     if threads:
         import cv2
 
         cv2.setNumThreads(max(1, int(threads)))  # share the cores with the other workers
-    return resolve(function)(task)
+    fn = resolve(function)
+    return [fn(task) for task in tasks]
 
 
 @dataclass
@@ -91,6 +102,8 @@ def run_tasks(
     scheduler: str | None = None,
     description: str = "tasks",
     progress: bool = True,
+    batch_key: Callable[[dict], str] | None = None,
+    max_batch: int = 32,
 ) -> list[dict]:
     """Run ``tasks`` (skipping stored ones) and return all rows in task order.
 
@@ -109,6 +122,9 @@ def run_tasks(
         Local worker processes (default: CPU count); 1 runs in this process.
     scheduler
         Address of a Dask distributed scheduler; runs the same tasks there instead.
+    batch_key
+        Label of a task's batch (tasks with equal labels run together in one worker,
+        at most ``max_batch`` at a time); default every task alone.
     """
     if version is None:
         version = getattr(importlib.import_module(function.partition(":")[0]), "FRAME_VERSION", 1)
@@ -118,16 +134,16 @@ def run_tasks(
     for key, task in zip(keys, tasks, strict=True):
         if key not in pending and store.get(key) is None:
             pending[key] = task
+    batches = _batches(pending, batch_key, max_batch)
     with _progress(progress, description, len(set(keys)), len(set(keys)) - len(pending)) as advance:
         if pending:
             if scheduler:
-                _run_dask(scheduler, function, pending, store, advance)
-            elif (workers or os.cpu_count() or 1) == 1 or len(pending) == 1:
-                for key, task in pending.items():
-                    store.put(key, run_one(function, task))
-                    advance()
+                _run_dask(scheduler, function, batches, store, advance)
+            elif (workers or os.cpu_count() or 1) == 1 or len(batches) == 1:
+                for batch in batches:
+                    _store_batch(store, batch, run_batch(function, list(batch.values())), advance)
             else:
-                _run_pool(workers or os.cpu_count() or 1, function, pending, store, advance)
+                _run_pool(workers or os.cpu_count() or 1, function, batches, store, advance)
     rows: list[dict] = []
     for key in keys:
         stored = store.get(key)
@@ -137,17 +153,36 @@ def run_tasks(
     return rows
 
 
+def _batches(pending: dict[str, dict], batch_key, max_batch: int) -> list[dict[str, dict]]:
+    """Pending tasks (key → task) grouped by ``batch_key``, in order of first appearance."""
+    if batch_key is None:
+        return [{key: task} for key, task in pending.items()]
+    groups: dict[str, dict[str, dict]] = {}
+    for key, task in pending.items():
+        groups.setdefault(batch_key(task), {})[key] = task
+    out = []
+    for group in groups.values():
+        items = list(group.items())
+        out += [dict(items[i : i + max_batch]) for i in range(0, len(items), max_batch)]
+    return out
+
+
+def _store_batch(store: ResultStore, batch: dict[str, dict], results: list[list[dict]], advance) -> None:
+    for key, rows in zip(batch, results, strict=True):
+        store.put(key, rows)
+        advance()
+
+
 def _run_pool(
-    workers: int, function: str, pending: dict[str, dict], store: ResultStore, advance, force: bool = False
+    workers: int, function: str, batches: list[dict[str, dict]], store: ResultStore, advance, force: bool = False
 ) -> None:
     # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked; each
     # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
-    n = workers if force else min(workers, len(pending))
+    n = workers if force else min(workers, len(batches))
     with _worker_threads(n), ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_one, function, task): key for key, task in pending.items()}
+        futures = {pool.submit(run_batch, function, list(batch.values())): batch for batch in batches}
         for future in as_completed(futures):
-            store.put(futures[future], future.result())
-            advance()
+            _store_batch(store, futures[future], future.result(), advance)
 
 
 class _worker_threads:
@@ -167,18 +202,19 @@ class _worker_threads:
         return False
 
 
-def _run_dask(address: str, function: str, pending: dict[str, dict], store: ResultStore, advance) -> None:
+def _run_dask(address: str, function: str, batches: list[dict[str, dict]], store: ResultStore, advance) -> None:
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 
     with Client(address) as client:
         futures = {
-            client.submit(run_one, function, task, key=f"beacon-sim-{key}", pure=False): key
-            for key, task in pending.items()
+            client.submit(
+                run_batch, function, list(batch.values()), key=f"beacon-sim-{next(iter(batch))}", pure=False
+            ): batch
+            for batch in batches
         }
         for future in dask_completed(list(futures)):
-            store.put(futures[future], future.result())
-            advance()
+            _store_batch(store, futures[future], future.result(), advance)
 
 
 class _progress:

@@ -24,9 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, write_tables
+from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
 from studies.report import Report
-from studies.runner import run_tasks
 
 NAME = "validate"
 AS_BUILT = {"foam": True, "paper_sheets": 1, "paper_colour": "matched", "led_current_mA": 20.0}
@@ -121,11 +120,11 @@ def run(
         return tasks
 
     preliminary = tasks_for({"preliminary"}, None)
-    rows = run_tasks(preliminary, out, workers=workers, scheduler=scheduler, description=f"{NAME} preliminary")
+    rows = run_frames(preliminary, out, workers=workers, scheduler=scheduler, description=f"{NAME} preliminary")
     derived = derive_thresholds(preliminary)
     atomic_write_bytes(out / "derived_thresholds.json", json.dumps(derived, indent=1).encode())
     later = tasks_for({"range", "primary"}, {"study": None, "derived": derived})
-    rows += run_tasks(later, out, workers=workers, scheduler=scheduler, description=f"{NAME} range + primary")
+    rows += run_frames(later, out, workers=workers, scheduler=scheduler, description=f"{NAME} range + primary")
     frame = write_tables(out, rows)
     table = validation_table(frame)
     atomic_write_bytes(out / "validation.csv", table.to_csv(index=False, float_format="%.6g").encode())

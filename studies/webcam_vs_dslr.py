@@ -19,11 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, detection_curve, frame_tasks, write_tables
+from studies.common import StudyOptions, detection_curve, frame_tasks, run_frames, write_tables
 from studies.max_range import estimate_max_range
 from studies.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.report import Report
-from studies.runner import run_tasks
 
 NAME = "webcam-vs-dslr"
 ALL_CAMERAS = ("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm")
@@ -51,8 +50,8 @@ def default_options(quick: bool) -> StudyOptions:
         ranges_m=tuple(float(r) for r in range(1, 11)),
         environments=("dark", "lit-room"),
         currents_mA=DRIVES_MA,
-        seeds=10,
-        jitter_poses=3,
+        seeds=6,
+        jitter_poses=2,
     )
 
 
@@ -82,7 +81,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary."""
     tasks = frame_tasks(conditions(options), options)
-    rows = run_tasks(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
+    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
     frame = write_tables(out, rows)
     summary = analyse(frame)
     mosaic = mosaic_png(options, out)

@@ -65,3 +65,14 @@ def test_dask_local_cluster_gives_the_same_table(tmp_path):
             run_tasks(TASKS[:8], tmp_path / "dask", FN, scheduler=cluster.scheduler_address, progress=False)
         )
     assert remote == local
+
+
+def test_batched_tasks_give_the_same_table_and_are_stored_one_by_one(tmp_path):
+    tasks = [{**t, "sleep_s": 0.0} for t in TASKS]
+    single = _table(run_tasks(tasks, tmp_path / "single", FN, workers=2, progress=False))
+    batched = run_tasks(
+        tasks, tmp_path / "batched", FN, workers=2, progress=False, batch_key=lambda t: str(t["seed"] % 3), max_batch=5
+    )
+    assert _table(batched) == single
+    store = ResultStore(tmp_path / "batched" / "tasks")
+    assert all(store.get(task_key(FN, t, 1)) is not None for t in tasks)

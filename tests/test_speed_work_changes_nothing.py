@@ -37,22 +37,37 @@ def _tasks():
     ]
 
 
-def _rows(tasks):
+def _forget_in_memory():
+    from camera_models import optics
+    from studies import frame
+
+    optics._UNIT_OPTICS.clear()
+    frame._RENDERS.clear()
+
+
+def _rows(tasks, fresh: bool):
     out = {}
     for t in tasks:
-        rows = simulate_frame(t)
-        for r in rows:
-            r.pop("worker_peak_rss_MiB")
-        out[json.dumps(t, sort_keys=True)] = rows
+        if fresh:
+            _forget_in_memory()
+        out[json.dumps(t, sort_keys=True)] = _without_rss(simulate_frame(t))
     return out
 
 
+def _without_rss(rows):
+    return [{k: v for k, v in r.items() if k != "worker_peak_rss_MiB"} for r in rows]
+
+
 def test_cold_and_warm_runs_in_any_order_agree(tmp_path, monkeypatch):
-    from camera_models import optics
+    from studies.common import run_frames
 
     monkeypatch.setenv("BEACON_SIM_CACHE", str(tmp_path / "cold"))
-    optics._UNIT_OPTICS.clear()
-    cold = _rows(_tasks())  # every render and lens image computed fresh
-    optics._UNIT_OPTICS.clear()
-    warm = _rows(list(reversed(_tasks())))  # renders from the disk cache, lens images reused across drives
+    cold = _rows(_tasks(), fresh=True)  # every render and lens image computed on its own
+    _forget_in_memory()
+    # renders from the disk cache, then held in memory and rescaled across drives
+    warm = _rows(list(reversed(_tasks())), fresh=False)
     assert json.dumps(cold, sort_keys=True) == json.dumps(warm, sort_keys=True)
+    _forget_in_memory()
+    batched = run_frames(_tasks(), tmp_path / "study", workers=1, progress=False)  # frames batched by render
+    expected = [row for t in _tasks() for row in cold[json.dumps(t, sort_keys=True)]]
+    assert json.dumps(_without_rss(batched), sort_keys=True) == json.dumps(expected, sort_keys=True)
