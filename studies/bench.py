@@ -159,6 +159,12 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
         t0 = time.perf_counter()
         frame.copy()
         copies.append(time.perf_counter() - t0)
+    codec = []  # the floor of any saved-JPEG frame: encoding it and reading it back
+    for _ in range(3):
+        t0 = time.perf_counter()
+        _, jpeg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, camera.isp.jpeg_quality])
+        cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
+        codec.append(time.perf_counter() - t0)
     per_frame = float(np.median([sum(x) for x in zip(*stages.values(), strict=True)]))
     memcpy = float(np.median(copies))
     return {
@@ -166,6 +172,8 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
         "memcpy_s": memcpy,
         "ratio": per_frame / memcpy,
         **{k: float(np.median(v)) for k, v in stages.items()},
+        "jpeg_encode_decode_s": float(np.median(codec)),
+        "jpeg_codec_vs_memcpy": float(np.median(codec)) / memcpy,
         "frame_bytes": int(frame.nbytes),
     }
 
@@ -212,13 +220,19 @@ def workers_and_dask(tasks: int = 12) -> dict:
                 work = _sweep_tasks(tasks, render_seed=1000 + k)
                 t0 = time.perf_counter()
                 if label == "dask_2":
+                    # `--scheduler ADDRESS` connects to a running cluster: its start-up is
+                    # timed apart, like the local pool's, whose processes start inside run_tasks
                     with (
                         _worker_threads(2, 1),
                         LocalCluster(
                             n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
                         ) as cluster,
                     ):
+                        times["dask_start"] = time.perf_counter() - t0
+                        t0 = time.perf_counter()
                         run_tasks(work, Path(tmp) / label, scheduler=cluster.scheduler_address, progress=False)
+                        times[label] = time.perf_counter() - t0
+                    continue
                 elif label == "workers_1_all_cores":
                     with _worker_threads(1):
                         run_tasks(work, Path(tmp) / label, workers=1, progress=False)
@@ -239,6 +253,7 @@ def workers_and_dask(tasks: int = 12) -> dict:
         **{f"{k}_s": v for k, v in times.items()},
         "workers_2_vs_1": times["workers_1"] / times["workers_2"],
         "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0,
+        "dask_overhead_with_cluster_start": (times["dask_start"] + times["dask_2"]) / times["workers_2"] - 1.0,
         "all_cores_1_worker_vs_2_workers": times["workers_1_all_cores"] / times["workers_2"],
     }
 

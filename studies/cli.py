@@ -240,8 +240,12 @@ def bench(
     t.add_row("two-stage vs brute-force marker, equal 1 % RMS", f"{result['two_stage_vs_brute_force']:.0f}×", "≥ 100×")
     t.add_row("100-frame sweep: render reuse vs re-render", f"{result['reuse_vs_rerender']:.1f}×", "≥ 50×")
     t.add_row("full T6 frame (optics+sensor+ISP+detect) / memcpy", f"{result['frame_vs_memcpy']:.0f}×", "≤ 20×")
+    codec = details["frame_vs_memcpy"]["jpeg_codec_vs_memcpy"]
+    t.add_row("  floor: JPEG encode + decode alone / memcpy", f"{codec:.0f}×", "")
     t.add_row("study throughput, 2 vs 1 workers", f"{result['workers_2_vs_1']:.2f}×", "≥ 1.7×")
     t.add_row("Dask LocalCluster overhead vs local pool", f"{result['dask_overhead']:+.1%}", "≤ 10 %")
+    with_start = details["workers_and_dask"]["dask_overhead_with_cluster_start"]
+    t.add_row("  the same, counting the cluster's start-up", f"{with_start:+.1%}", "")
     if result["llvm_vs_scalar"] is not None:
         t.add_row(f"{result['variant']} vs scalar, same render", f"{result['llvm_vs_scalar']:.0f}×", "")
     Console().print(t)
