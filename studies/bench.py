@@ -134,6 +134,7 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
 
     from camera_models.camera import load_camera
     from camera_models.capture import capture
+    from camera_models.isp import encode_jpeg
     from pipeline.detect import detect
     from scenes.render import render
     from scenes.scenario import RenderSettings, Scenario
@@ -162,8 +163,8 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
     codec = []  # the floor of any saved-JPEG frame: encoding it and reading it back
     for _ in range(3):
         t0 = time.perf_counter()
-        _, jpeg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, camera.isp.jpeg_quality])
-        cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
+        jpeg = encode_jpeg(frame, camera)
+        cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
         codec.append(time.perf_counter() - t0)
     per_frame = float(np.median([sum(x) for x in zip(*stages.values(), strict=True)]))
     memcpy = float(np.median(copies))
