@@ -259,6 +259,69 @@ def workers_and_dask(tasks: int = 12) -> dict:
     }
 
 
+def full_grid_estimate(batches: int = 12, seed: int = 0) -> dict:
+    """Time of the complete replication grid (:mod:`studies.replication`, full form) on
+    this machine, extrapolated from a random sample of its render batches (a geometry
+    with all its drives and seeds), run with 2 workers once with an empty render cache
+    (cold) and once more with the renders cached but every frame recomputed (warm).
+
+    Near-field marker renders (one per diffuser configuration and colour) are made
+    beforehand and counted apart, at their measured time each.
+    """
+    import os
+    import random
+
+    from studies import replication
+    from studies.common import frame_tasks, run_frames
+    from studies.frame import render_batch_key, simulate_frame
+
+    options = replication.default_options(quick=False)
+    tasks = frame_tasks(replication.conditions(options), options, estimators=["best"])
+    groups: dict[str, list[dict]] = {}
+    for t in tasks:
+        groups.setdefault(render_batch_key(t), []).append(t)
+    sample = random.Random(seed).sample(sorted(groups), batches)
+    work = [t for key in sample for t in groups[key]]
+    near_fields = {(t["scenario"]["foam"], t["scenario"]["paper_sheets"], t["scenario"]["side"]) for t in tasks}
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            near_s = []
+            for key in sample:  # the sample's near fields, untimed in the batches; timed here
+                t = groups[key][0]
+                t0 = time.perf_counter()
+                simulate_frame({**t, "scenario": {**t["scenario"], "range_m": 40.0}})  # tiny crop: ~all near field
+                near_s.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            run_frames(work, Path(tmp) / "cold", workers=2, progress=False)
+            cold = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            run_frames(work, Path(tmp) / "warm", workers=2, progress=False)
+            warm = time.perf_counter() - t0
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
+    scale = len(groups) / batches
+    near_field_s = float(np.max(near_s)) * len(near_fields)  # the slowest as an upper bound per near field
+    return {
+        "frames": len(tasks),
+        "render_batches": len(groups),
+        "sampled_batches": batches,
+        "sampled_frames": len(work),
+        "sample_cold_s": cold,
+        "sample_warm_s": warm,
+        "near_fields": len(near_fields),
+        "near_fields_s": near_field_s,
+        "cold_h": (cold * scale + near_field_s) / 3600.0,
+        "warm_h": warm * scale / 3600.0,
+        "cold_ms_per_frame": 1e3 * cold / len(work),
+        "warm_ms_per_frame": 1e3 * warm / len(work),
+    }
+
+
 def variant_ratio() -> dict:
     """The same small render with the active (LLVM/CUDA) variant and the scalar one, each
     in its own process (a process keeps one backend)."""

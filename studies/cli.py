@@ -214,6 +214,7 @@ def bench(
         ("reuse_vs_rerender", b.reuse_vs_rerender),
         ("frame_vs_memcpy", b.frame_vs_memcpy),
         ("workers_and_dask", b.workers_and_dask),
+        ("full_grid_estimate", b.full_grid_estimate),
     ]
     if not skip_scalar:
         steps.append(("variant", b.variant_ratio))
@@ -229,6 +230,8 @@ def bench(
         "dask_overhead": details["workers_and_dask"]["dask_overhead"],
         "variant": active_variant().variant,
         "llvm_vs_scalar": details["variant"]["ratio"] if "variant" in details else None,
+        "full_grid_cold_h": details["full_grid_estimate"]["cold_h"],
+        "full_grid_warm_h": details["full_grid_estimate"]["warm_h"],
         "details": details,
     }
     if json_out:
@@ -246,19 +249,27 @@ def bench(
     t.add_row("Dask LocalCluster overhead vs local pool", f"{result['dask_overhead']:+.1%}", "≤ 10 %")
     with_start = details["workers_and_dask"]["dask_overhead_with_cluster_start"]
     t.add_row("  the same, counting the cluster's start-up", f"{with_start:+.1%}", "")
+    grid = details["full_grid_estimate"]
+    t.add_row(
+        f"replication grid ({grid['frames']:,} frames), extrapolated from {grid['sampled_batches']} render batches",
+        f"cold {grid['cold_h']:.1f} h, warm {grid['warm_h']:.1f} h",
+        "< 1 h, < 5 min",
+    )
     if result["llvm_vs_scalar"] is not None:
         t.add_row(f"{result['variant']} vs scalar, same render", f"{result['llvm_vs_scalar']:.0f}×", "")
     Console().print(t)
 
 
 STUDIES = ("webcam-vs-dslr", "brightness-diffuser", "range-limit")
+"""The studies the main job runs (quick forms)."""
+ALL_STUDIES = (*STUDIES, "replication")
 
 
 def _study_module(name: str):
     import importlib
 
-    if name not in STUDIES:
-        raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
+    if name not in ALL_STUDIES:
+        raise UsageError(f"study: expected one of {', '.join(ALL_STUDIES)}, got {name!r}")
     return importlib.import_module(f"studies.{name.replace('-', '_')}")
 
 
@@ -275,7 +286,7 @@ def _csv(name: str, text: str | None, convert=str) -> tuple | None:
 
 @app.command()
 def study(
-    name: Annotated[str, typer.Argument(help="webcam-vs-dslr, brightness-diffuser or range-limit.")],
+    name: Annotated[str, typer.Argument(help="webcam-vs-dslr, brightness-diffuser, range-limit or replication.")],
     out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
     quick: Annotated[bool, typer.Option("--quick", help="The small grid the main job runs.")] = False,
     cameras: Annotated[str | None, typer.Option("--cameras", help="Comma-separated camera names.")] = None,

@@ -8,7 +8,7 @@ import shutil
 import pandas as pd
 import pytest
 
-from studies import brightness_diffuser, range_limit, validate, webcam_vs_dslr
+from studies import brightness_diffuser, range_limit, replication, validate, webcam_vs_dslr
 
 pytestmark = pytest.mark.usefixtures("mitsuba_variant")
 TINY = {"spp": 2, "oversampling": 1, "crop": "target", "near_field_spp": 64}
@@ -54,6 +54,20 @@ def test_range_limit_tiny(tmp_path):
     _check_outputs(tmp_path, ("max_range",))
     rec = summary["max_range"][0]
     assert set(rec) >= {"camera", "beacon", "side", "yaw_deg", "max_range_m", "low_m", "high_m", "limiting_cause"}
+
+
+def test_replication_grid_is_the_issues_grid_and_runs_tiny(tmp_path):
+    full = replication.default_options(False)
+    # V1/V2 × 4 colours × 1-10 m × 0-30° in 5° × 4 cameras × 0-5 sheets ± foam × 8 drives × 10 seeds
+    assert len(replication.conditions(full)) * full.seeds == 2 * 4 * 10 * 7 * 4 * 12 * 8 * 10
+    assert len(set(full.currents_mA)) == 8 and len(set(full.diffusers)) == 12
+    o = replication.default_options(True).with_overrides(
+        cameras=("logitech-c270",), ranges_m=(3.0, 6.0), yaws_deg=(0.0,), currents_mA=(2.0,), seeds=1, render=TINY
+    )
+    summary = replication.run(tmp_path, o, workers=1)
+    _check_outputs(tmp_path, ("max_range",))
+    assert len(summary["max_range"]) == len(o.diffusers)  # one camera, beacon and drive
+    assert (tmp_path / "configurations.csv").is_file()
 
 
 def test_validate_tiny(tmp_path, monkeypatch):
