@@ -124,9 +124,7 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, un
         shape = exit_spectrum / transmitted if transmitted > 0 else led.spectral_shape
     unit_image = np.asarray(unit_image, dtype=np.float32)
     unit_image.setflags(write=False)
-    return RadianceComponent(
-        group, (unit_image * np.float32(factor)).astype(np.float32), shape, unit_key, unit_image, float(factor)
-    )
+    return RadianceComponent(group, unit_image * np.float32(factor), shape, unit_key, unit_image, float(factor))
 
 
 def with_led_current(radiance: SpectralRadiance, current_mA: float) -> SpectralRadiance:
