@@ -8,6 +8,11 @@ successes redrawn from the fitted model at the same ranges): ``low_m``/``high_m`
 the 2.5 and 97.5 percentiles. When every frame succeeds the range is only bounded below
 (``high_m`` = inf); when none does, above (``max_range_m`` = 0).
 
+Near the camera a marker can fail too (clipped cores lose their colour), so success
+need not fall monotonically from the nearest range: the fall-off is fitted to the frames
+from the range with the highest success rate outward (``fitted_from_m``; the nearest one
+among ties). Where that rate is below 0.95 no range qualifies and the maximum range is 0.
+
 Why it ends there: the failures among frames within ±25 % of r₉₅ (or the nearest
 failures) are classified by :func:`failure_cause` and the most common cause is named.
 """
@@ -67,6 +72,7 @@ class MaxRange:
     limiting_cause: str
     frames: int
     successes: int
+    fitted_from_m: float = math.nan
 
     def to_dict(self) -> dict:
         """JSON-able form."""
@@ -87,31 +93,53 @@ def _fit(r: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(res.x[0]), float(math.exp(res.x[1]))
 
 
+def _nominal_m(row: dict) -> float:
+    return float(row.get("nominal_range_m", row["range_m"]))
+
+
+def far_side(rows: list[dict]) -> tuple[list[dict], float]:
+    """The frames from the nominal range with the highest success rate (nearest among
+    ties) outward, and that range, m."""
+    outcomes: dict[float, list[bool]] = {}
+    for x in rows:
+        outcomes.setdefault(_nominal_m(x), []).append(frame_ok(x))
+    rates = {r: float(np.mean(v)) for r, v in outcomes.items()}
+    start = min(r for r, p in rates.items() if p == max(rates.values()))
+    return [x for x in rows if _nominal_m(x) >= start], start
+
+
 def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) -> MaxRange:
     """Fit the logistic model to ``rows`` (frames with ``range_m``) and find r₉₅."""
-    r = np.array([float(x["range_m"]) for x in rows])
-    y = np.array([frame_ok(x) for x in rows], dtype=bool)
-    n, k = len(rows), int(y.sum())
-    if n == 0:
+    if not rows:
         return MaxRange(math.nan, math.nan, math.nan, "no frames", 0, 0)
-    fails = [x for x, ok in zip(rows, y, strict=True) if not ok]
-    if k == n:
-        return MaxRange(float(r.max()), float(r.max()), math.inf, "not reached (all frames correct)", n, k)
-    if k == 0:
-        return MaxRange(0.0, 0.0, float(r.min()), _dominant(fails), n, k)
+    fitted, start = far_side(rows)
+    nearer_failed = start > min(_nominal_m(x) for x in rows)  # a near failure zone was left out
+    r = np.array([float(x["range_m"]) for x in fitted])
+    y = np.array([frame_ok(x) for x in fitted], dtype=bool)
+    n, k = len(rows), sum(frame_ok(x) for x in rows)
+    fails = [x for x, ok in zip(fitted, y, strict=True) if not ok]
+    if y.all():
+        return MaxRange(float(r.max()), float(r.max()), math.inf, "not reached (all frames correct)", n, k, start)
+    if not y.any():
+        return MaxRange(0.0, 0.0, float(r.min()), _dominant(fails), n, k, start)
+    floor = float(r.min()) if nearer_failed else -math.inf  # no extrapolation into the near zone
+
+    def r95_of(b50: float, bs: float) -> float:
+        value = b50 - bs * LN19
+        return value if value >= floor else 0.0
+
     r50, s = _fit(r, y)
-    r95 = r50 - s * LN19
+    r95 = r95_of(r50, s)
     rng = np.random.default_rng(seed)
     p = 1.0 / (1.0 + np.exp((r - r50) / s))
     boot = []
     for _ in range(bootstrap):
-        yb = rng.random(n) < p
-        if 0 < yb.sum() < n:
-            b50, bs = _fit(r, yb)
-            boot.append(b50 - bs * LN19)
+        yb = rng.random(len(r)) < p
+        if 0 < yb.sum() < len(r):
+            boot.append(r95_of(*_fit(r, yb)))
     low, high = np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan)
     near = [x for x in fails if abs(float(x["range_m"]) - r95) <= 0.25 * max(r95, 1.0)] or fails
-    return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(max(high, 0.0)), _dominant(near), n, k)
+    return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(max(high, 0.0)), _dominant(near), n, k, start)
 
 
 def _dominant(rows: list[dict]) -> str:

@@ -53,6 +53,22 @@ def test_all_correct_is_only_bounded_below():
     assert result.max_range_m == 3 and math.isinf(result.high_m)
 
 
+def test_a_near_failure_zone_does_not_hide_the_far_limit():
+    # clipped cores fail at 1-2 m; from 3 m on the usual fall-off: r95 is the far one
+    r50, s = 9.0, 0.5
+    near = _frames(-100.0, 0.5, [1.0, 2.0], 40)  # every near frame fails
+    result = estimate_max_range(near + _frames(r50, s, np.arange(3, 14.01, 0.5), 40, seed=1))
+    truth = r50 - s * math.log(19)
+    assert result.fitted_from_m == 3.0
+    assert result.low_m <= truth <= result.high_m
+    assert result.max_range_m == pytest.approx(truth, abs=0.5)
+
+
+def test_no_range_qualifies_when_the_best_rate_is_low():
+    rows = _frames(-100.0, 0.5, [1.0, 2.0], 20) + _frames(2.0, 0.5, [3.0, 4.0, 5.0], 20, seed=2)
+    assert estimate_max_range(rows).max_range_m == 0.0
+
+
 def test_failure_causes():
     base = {
         "detected": False,
