@@ -12,6 +12,8 @@ Near the camera a marker can fail too (clipped cores lose their colour), so succ
 need not fall monotonically from the nearest range: the fall-off is fitted to the frames
 from the range with the highest success rate outward (``fitted_from_m``; the nearest one
 among ties). Where that rate is below 0.95 no range qualifies and the maximum range is 0.
+Nor is r₉₅ extrapolated beyond the farthest range tested: a fit that puts it there (no
+fall-off in the data, only isolated failures) gives that range, with ``high_m`` = inf.
 
 Why it ends there: the failures among frames within ±25 % of r₉₅ (or the nearest
 failures) are classified by :func:`failure_cause` and the most common cause is named.
@@ -123,10 +125,11 @@ def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) ->
     if not y.any():
         return MaxRange(0.0, 0.0, float(r.min()), _dominant(fails), n, k, start)
     floor = float(r.min()) if nearer_failed else -math.inf  # no extrapolation into the near zone
+    ceiling = float(r.max())  # nor beyond the farthest frame (isolated failures fit no fall-off)
 
     def r95_of(b50: float, bs: float) -> float:
         value = b50 - bs * LN19
-        return value if value >= floor else 0.0
+        return min(value, ceiling) if value >= floor else 0.0
 
     r50, s = _fit(r, y)
     r95 = r95_of(r50, s)
@@ -138,6 +141,8 @@ def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) ->
         if 0 < yb.sum() < len(r):
             boot.append(r95_of(*_fit(r, yb)))
     low, high = np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan)
+    if high >= ceiling:
+        high = math.inf  # the upper end lies beyond the ranges tested
     near = [x for x in fails if abs(float(x["range_m"]) - r95) <= 0.25 * max(r95, 1.0)] or fails
     return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(max(high, 0.0)), _dominant(near), n, k, start)
 

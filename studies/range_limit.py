@@ -88,6 +88,7 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
                 "low_m": mr.low_m,
                 "high_m": mr.high_m,
                 "limiting_cause": mr.limiting_cause,
+                "fitted_from_m": mr.fitted_from_m,
             }
         )
     summary = {

@@ -69,6 +69,13 @@ def test_no_range_qualifies_when_the_best_rate_is_low():
     assert estimate_max_range(rows).max_range_m == 0.0
 
 
+def test_isolated_failures_give_no_extrapolated_range():
+    rows = _frames(100.0, 0.5, [2.0, 4.0, 6.0, 8.0], 6)
+    rows[7] = {**rows[7], "detected": False, "reason": "no blob"}  # one failure at 4 m
+    result = estimate_max_range(rows)
+    assert result.max_range_m <= 8.0 and math.isinf(result.high_m)
+
+
 def test_failure_causes():
     base = {
         "detected": False,
