@@ -141,7 +141,7 @@ def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) ->
         if 0 < yb.sum() < len(r):
             boot.append(r95_of(*_fit(r, yb)))
     low, high = np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan)
-    if high >= ceiling:
+    if high >= ceiling - 1e-9:
         high = math.inf  # the upper end lies beyond the ranges tested
     near = [x for x in fails if abs(float(x["range_m"]) - r95) <= 0.25 * max(r95, 1.0)] or fails
     return MaxRange(float(max(r95, 0.0)), float(max(low, 0.0)), float(max(high, 0.0)), _dominant(near), n, k, start)
