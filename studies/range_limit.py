@@ -120,25 +120,36 @@ def _report(out: Path, options: StudyOptions, summary: dict) -> None:
         frame = pd.DataFrame(summary[key])
         if frame.empty:
             continue
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        for (cam, beacon, side, current), g in frame.groupby(["camera", "beacon", "side", "led_current_mA"]):
-            r = np.nan_to_num(g.max_range_m.to_numpy(float))
-            lo = np.nan_to_num(g.low_m.to_numpy(float))
-            hi = np.where(np.isfinite(g.high_m), g.high_m, r)
-            # bars clipped at zero: the bootstrap interval need not contain a fit clipped at 0 m
-            ax.errorbar(
-                g.yaw_deg,
-                r,
-                yerr=[np.clip(r - lo, 0, None), np.clip(hi - r, 0, None)],
-                marker="o",
-                capsize=3,
-                label=f"{cam}, {beacon}, {side}, {current:g} mA",
-            )
-        ax.axhline(PLANNED_RANGE_M, color="red", ls="--", lw=1, label="planned 10 m")
-        ax.set_xlabel("yaw, degrees")
-        ax.set_ylabel("maximum range, m")
-        ax.set_ylim(bottom=0)
-        ax.legend(fontsize=7)
+        cams = sorted(set(frame.camera))
+        fig, axes = plt.subplots(
+            1, len(cams), figsize=(3.6 * len(cams) + 1, 4), sharey=True, squeeze=False, constrained_layout=True
+        )
+        currents = sorted(set(frame.led_current_mA))
+        colours = {c: plt.cm.viridis(i / max(len(currents) - 1, 1) * 0.85) for i, c in enumerate(currents)}
+        styles = {"v1": ("s", ":"), "v2": ("o", "-")}
+        for ax, cam in zip(axes[0], cams, strict=True):
+            for (beacon, side, current), g in frame[frame.camera == cam].groupby(["beacon", "side", "led_current_mA"]):
+                r = np.nan_to_num(g.max_range_m.to_numpy(float))
+                lo = np.nan_to_num(g.low_m.to_numpy(float))
+                hi = np.where(np.isfinite(g.high_m), g.high_m, r)
+                marker, line = styles.get(beacon, ("^", "--"))
+                # bars clipped at zero: the bootstrap interval need not contain a fit clipped at 0 m
+                ax.errorbar(
+                    g.yaw_deg,
+                    r,
+                    yerr=[np.clip(r - lo, 0, None), np.clip(hi - r, 0, None)],
+                    marker=marker,
+                    ls=line,
+                    color=colours[current],
+                    capsize=3,
+                    label=f"{beacon}, {side}, {current:g} mA",
+                )
+            ax.axhline(PLANNED_RANGE_M, color="red", ls="--", lw=1, label="planned 10 m")
+            ax.set_title(cam, fontsize=10)
+            ax.set_xlabel("yaw, degrees")
+            ax.set_ylim(bottom=0)
+        axes[0][0].set_ylabel("maximum range, m")
+        axes[0][-1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
         rep.heading(f"Maximum range, {label}")
         rep.figure(
             fig,
