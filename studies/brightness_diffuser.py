@@ -13,14 +13,13 @@ Renders do not depend on the current (linearity), so the current sweep costs no 
 
 from __future__ import annotations
 
-import itertools
 import json
 from pathlib import Path
 
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
+from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
 from studies.metrics import detection_success, wilson_interval
 from studies.report import Report
 
@@ -58,23 +57,7 @@ def default_options(quick: bool) -> StudyOptions:
 
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep."""
-    return [
-        {
-            "beacon": beacon,
-            "side": side,
-            "range_m": float(r),
-            "yaw_deg": 0.0,
-            "camera": cam,
-            "environment": env,
-            "led_current_mA": float(i),
-            "foam": foam,
-            "paper_sheets": n,
-            "paper_colour": colour,
-        }
-        for cam, beacon, side, env, r, i, (foam, n, colour) in itertools.product(
-            o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.currents_mA, o.diffusers
-        )
-    ]
+    return grid_conditions(o)
 
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:

@@ -11,6 +11,7 @@ condition sees the same poses: drive sweeps are paired and reuse one render per 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -86,6 +87,46 @@ def _check_choices(name: str, values: Sequence[str], allowed: Sequence[str]) -> 
     bad = [v for v in values if v not in allowed]
     if bad:
         raise ValueError(f"{name}: expected some of {', '.join(allowed)}, got unknown {', '.join(map(str, bad))}")
+
+
+GRID_AXES = {
+    "camera": "cameras",
+    "beacon": "beacons",
+    "side": "sides",
+    "environment": "environments",
+    "yaw_deg": "yaws_deg",
+    "range_m": "ranges_m",
+    "led_current_mA": "currents_mA",
+    "diffuser": "diffusers",
+}
+"""Axes of a study grid, in the default loop order (first outermost), and the
+:class:`StudyOptions` field holding each one's values."""
+
+
+def grid_conditions(o: StudyOptions, order: Sequence[str] = tuple(GRID_AXES)) -> list[dict]:
+    """Nominal conditions for every combination of the options' values, looping over
+    the axes of :data:`GRID_AXES` in ``order`` (first outermost; all eight named)."""
+    if sorted(order) != sorted(GRID_AXES):
+        raise ValueError(f"order: expected each of {', '.join(GRID_AXES)} once, got {', '.join(order)}")
+    out = []
+    for values in itertools.product(*(getattr(o, GRID_AXES[axis]) for axis in order)):
+        v = dict(zip(order, values, strict=True))
+        foam, sheets, colour = v["diffuser"]
+        out.append(
+            {
+                "beacon": v["beacon"],
+                "side": v["side"],
+                "range_m": float(v["range_m"]),
+                "yaw_deg": float(v["yaw_deg"]),
+                "camera": v["camera"],
+                "environment": v["environment"],
+                "led_current_mA": float(v["led_current_mA"]),
+                "foam": foam,
+                "paper_sheets": sheets,
+                "paper_colour": colour,
+            }
+        )
+    return out
 
 
 def jitter(condition: dict, index: int) -> dict:

@@ -8,14 +8,13 @@ planned 10 m is drawn against it.
 
 from __future__ import annotations
 
-import itertools
 import json
 from pathlib import Path
 
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
+from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
 from studies.max_range import estimate_max_range
 from studies.report import Report
 
@@ -47,23 +46,7 @@ def default_options(quick: bool) -> StudyOptions:
 
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep."""
-    return [
-        {
-            "beacon": beacon,
-            "side": side,
-            "range_m": float(r),
-            "yaw_deg": float(y),
-            "camera": cam,
-            "environment": env,
-            "led_current_mA": float(current),
-            "foam": foam,
-            "paper_sheets": n,
-            "paper_colour": colour,
-        }
-        for cam, beacon, side, env, y, r, current, (foam, n, colour) in itertools.product(
-            o.cameras, o.beacons, o.sides, o.environments, o.yaws_deg, o.ranges_m, o.currents_mA, o.diffusers
-        )
-    ]
+    return grid_conditions(o)
 
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:

@@ -13,14 +13,13 @@ drive, as heat maps and a table, and the detection probability of every configur
 
 from __future__ import annotations
 
-import itertools
 import json
 from pathlib import Path
 
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, run_frames, write_tables
+from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
 from studies.max_range import estimate_max_range
 from studies.report import Report
 
@@ -57,23 +56,9 @@ def default_options(quick: bool) -> StudyOptions:
 
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep (drive innermost, so a render's frames are adjacent)."""
-    return [
-        {
-            "beacon": beacon,
-            "side": side,
-            "range_m": float(r),
-            "yaw_deg": float(y),
-            "camera": cam,
-            "environment": env,
-            "led_current_mA": float(i),
-            "foam": foam,
-            "paper_sheets": n,
-            "paper_colour": colour,
-        }
-        for cam, beacon, (foam, n, colour), side, env, y, r, i in itertools.product(
-            o.cameras, o.beacons, o.diffusers, o.sides, o.environments, o.yaws_deg, o.ranges_m, o.currents_mA
-        )
-    ]
+    return grid_conditions(
+        o, ("camera", "beacon", "diffuser", "side", "environment", "yaw_deg", "range_m", "led_current_mA")
+    )
 
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, detection_curve, frame_tasks, run_frames, write_tables
+from studies.common import StudyOptions, detection_curve, frame_tasks, grid_conditions, run_frames, write_tables
 from studies.max_range import estimate_max_range
 from studies.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.report import Report
@@ -57,25 +57,7 @@ def default_options(quick: bool) -> StudyOptions:
 
 def conditions(o: StudyOptions) -> list[dict]:
     """Nominal conditions of the sweep."""
-    out = []
-    for camera, beacon, side, env, r, current, (foam, sheets, colour) in itertools.product(
-        o.cameras, o.beacons, o.sides, o.environments, o.ranges_m, o.currents_mA, o.diffusers
-    ):
-        out.append(
-            {
-                "beacon": beacon,
-                "side": side,
-                "range_m": float(r),
-                "yaw_deg": 0.0,
-                "camera": camera,
-                "environment": env,
-                "led_current_mA": float(current),
-                "foam": foam,
-                "paper_sheets": sheets,
-                "paper_colour": colour,
-            }
-        )
-    return out
+    return grid_conditions(o)
 
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
