@@ -4,11 +4,13 @@ For every camera, side and chosen range it sweeps the LED current (log-spaced), 
 or off, 0-5 sheets and white versus matching paper, and maps the probability of a
 correct detection (best tracker; the study's beside it), the colour separability of the
 marker from the other sides' reference colours, and the fraction of saturated pixels in
-the marker cores. A configuration is in the *operating window* when the estimated P(correct) ≥ 0.95
-(its Wilson interval is reported beside it) and the mean core saturation is below 50 %; the recommended
-setting per camera and side is the window's configuration with the largest margin in
-saturation, reported with the LED's radiant power (mW, datasheet model) at that current.
-Renders do not depend on the current (linearity), so the current sweep costs no renders.
+the marker cores. A configuration is in the *operating window* when the estimated
+P(correct) ≥ 0.95 (its Wilson interval is reported beside it) and the mean core
+saturation is below 50 %, at every range studied; the recommended setting per camera
+and side is the window's configuration with the largest margin in saturation, reported
+with the radiant power (mW, datasheet model) of one LED and of the side's five LEDs at
+that current. Renders do not depend on the current (linearity), so the current sweep
+costs no renders.
 """
 
 from __future__ import annotations
@@ -76,6 +78,7 @@ def configuration_table(frame):
     """One row per camera × side × range × current × diffuser × tracker with the metrics."""
     import pandas as pd
 
+    from scenes.beacon import beacon_design
     from scenes.led import led_for_side
 
     keys = ["camera", "side", "nominal_range_m", "led_current_mA", "foam", "paper_sheets", "paper_colour", "tracker"]
@@ -98,18 +101,29 @@ def configuration_table(frame):
             g_chroma=float(np.nanmean(chroma[:, 1])),
             led_power_mW=1e3 * led_for_side(rec["side"]).radiant_flux_W(rec["led_current_mA"]),
         )
+        markers = len(beacon_design(str(g.beacon.iloc[0])).marker_positions_m())
+        rec["side_power_mW"] = markers * rec["led_power_mW"]  # every LED of the side at this drive
         rec["in_window"] = bool(p >= 0.95 and rec["core_saturation"] < 0.5)
         out.append(rec)
     return pd.DataFrame(out)
 
 
 def recommend(table) -> list[dict]:
-    """Per camera and side: the in-window configuration (best tracker) with the least core
-    saturation, ties broken by the lower LED power."""
+    """Per camera and side: of the configurations in the window at every range studied
+    (best tracker), the one with the least core saturation at its worst range, ties
+    broken by the lower LED power; ``p_detect`` is its lowest over the ranges."""
     out = []
     best = table[table.tracker == "best"]
+    config = ["led_current_mA", "foam", "paper_sheets", "paper_colour"]
     for (cam, side), g in best.groupby(["camera", "side"]):
-        window = g[g.in_window]
+        per_config = g.groupby(config, as_index=False).agg(
+            in_window=("in_window", "all"),
+            core_saturation=("core_saturation", "max"),
+            p_detect=("p_detect", "min"),
+            led_power_mW=("led_power_mW", "first"),
+            side_power_mW=("side_power_mW", "first"),
+        )
+        window = per_config[per_config.in_window]
         if window.empty:
             out.append({"camera": cam, "side": side, "window": "empty"})
             continue
@@ -118,9 +132,10 @@ def recommend(table) -> list[dict]:
             {
                 "camera": cam,
                 "side": side,
-                "window": f"{len(window)} of {len(g)} configurations",
+                "window": f"{len(window)} of {len(per_config)} configurations",
                 "led_current_mA": float(pick.led_current_mA),
                 "led_power_mW": float(pick.led_power_mW),
+                "side_power_mW": float(pick.side_power_mW),
                 "foam": bool(pick.foam),
                 "paper_sheets": int(pick.paper_sheets),
                 "paper_colour": str(pick.paper_colour),
@@ -147,7 +162,8 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
     )
     rep.heading("Recommended operating window")
     rep.table(
-        pd.DataFrame(summary["recommended"]), "Per camera and side (best tracker): P ≥ 0.95, cores < 50 % clipped"
+        pd.DataFrame(summary["recommended"]),
+        "Per camera and side (best tracker): P ≥ 0.95 and cores < 50 % clipped at every range",
     )
     best = table[table.tracker == "best"]
     for (cam, side, r), g in best.groupby(["camera", "side", "nominal_range_m"]):
