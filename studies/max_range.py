@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.special import expit
 
 from studies.metrics import detection_success
 
@@ -134,7 +135,7 @@ def estimate_max_range(rows: list[dict], bootstrap: int = 300, seed: int = 0) ->
     r50, s = _fit(r, y)
     r95 = r95_of(r50, s)
     rng = np.random.default_rng(seed)
-    p = 1.0 / (1.0 + np.exp((r - r50) / s))
+    p = expit((r50 - r) / s)  # 1 / (1 + e^((r - r50)/s)) without overflow
     boot = []
     for _ in range(bootstrap):
         yb = rng.random(len(r)) < p

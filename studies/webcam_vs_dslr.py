@@ -221,24 +221,36 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     rep.heading("Ranking")
     rep.table(pd.DataFrame(summary["ranking"]), "Cameras by maximum range (best tracker), then colour separability")
     rep.heading("Detection probability versus range")
-    curve = detection_curve(frame[frame.estimator == "best"], ["camera", "tracker"])
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for ax, tracker in zip(axes, ("thesis", "best"), strict=True):
-        for cam, g in curve[curve.tracker == tracker].groupby("camera"):
+    curve = detection_curve(frame[frame.estimator == "best"], ["camera", "tracker", "led_current_mA", "beacon"])
+    currents = sorted(set(curve.led_current_mA))
+    fig, axes = plt.subplots(
+        2, len(currents), figsize=(5.5 * len(currents), 7), sharex=True, sharey=True, squeeze=False
+    )
+    colours = {cam: f"C{i}" for i, cam in enumerate(options.cameras)}
+    for (i, tracker), (j, current) in itertools.product(enumerate(("thesis", "best")), enumerate(currents)):
+        ax = axes[i][j]
+        sel = curve[(curve.tracker == tracker) & (curve.led_current_mA == current)]
+        for (cam, beacon), g in sel.groupby(["camera", "beacon"]):
             ax.errorbar(
                 g.nominal_range_m,
                 g.p_detect,
-                yerr=[g.p_detect - g.p_low, g.p_high - g.p_detect],
-                marker="o",
+                yerr=[np.clip(g.p_detect - g.p_low, 0, None), np.clip(g.p_high - g.p_detect, 0, None)],
+                marker="o" if beacon == "v2" else "s",
+                ls="-" if beacon == "v2" else ":",
+                color=colours.get(cam),
                 capsize=3,
-                label=cam,
+                label=f"{cam}, {beacon}",
             )
         ax.axhline(0.95, color="grey", ls=":", lw=1)
-        ax.set_title(f"{tracker} tracker")
+        ax.set_title(f"{tracker} tracker, {current:g} mA", fontsize=10)
         ax.set_xlabel("range, m")
-    axes[0].set_ylabel("P(correct side, 5 markers numbered)")
-    axes[1].legend(fontsize=8)
-    rep.figure(fig, "Probability of a correct detection with Wilson 95 % intervals; dotted line: 0.95.")
+        ax.set_ylabel("P(correct side, 5 markers numbered)")
+    axes[0][-1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    rep.figure(
+        fig,
+        "Probability of a correct detection with Wilson 95 % intervals, over sides, environments and seeds; "
+        "dotted line: 0.95.",
+    )
     rep.heading("Maximum range")
     rep.table(
         pd.DataFrame(summary["max_range"]).drop(columns=["frames", "successes"]),
