@@ -160,6 +160,7 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
     from studies.frame import target_crop_png
 
     cams = options.cameras
+    beacon = "v2" if "v2" in options.beacons else options.beacons[0]  # V1's markers face sideways
     fig, axes = plt.subplots(
         len(cams),
         len(MOSAIC_RANGES_M),
@@ -172,7 +173,7 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
             cond = conditions(
                 StudyOptions(
                     cameras=(cam,),
-                    beacons=options.beacons[:1],
+                    beacons=(beacon,),
                     sides=options.sides[:1],
                     ranges_m=(r,),
                     environments=options.environments[:1],
@@ -192,8 +193,8 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
             if j == 0:
                 ax.set_ylabel(cam, fontsize=9)
     fig.suptitle(
-        f"{options.beacons[0].upper()} {options.sides[0]} side, 240 mm square around marker 1, "
-        "saved JPEG, camera pixels shown as blocks"
+        f"{beacon.upper()} {options.sides[0]} side at {options.currents_mA[0]:g} mA, 240 mm square around "
+        "marker 1, saved JPEG, camera pixels shown as blocks"
     )
     import io
 
