@@ -74,8 +74,8 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
 
 def analyse(frame) -> dict:
     """Headline numbers: max range per camera, drive and tracker; colour separability per
-    camera and drive; cameras ranked by their best drive's maximum range (best tracker),
-    then by that drive's colour separability."""
+    camera and drive; cameras ranked by their best drive's maximum range (best tracker, to
+    0.1 m), then by that drive's colour separability."""
     summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
     keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
     for key, g in frame[frame.estimator == "best"].groupby(keys):
@@ -96,7 +96,8 @@ def analyse(frame) -> dict:
             ),
             None,
         )
-        cand = (rec["max_range_m"], np.nan_to_num(sep if sep is not None else 0.0), rec["led_current_mA"])
+        # ranges compared to 0.1 m: finer differences are the pose jitter of the farthest frames
+        cand = (round(rec["max_range_m"], 1), np.nan_to_num(sep if sep is not None else 0.0), rec["led_current_mA"])
         if rec["camera"] not in best or cand[:2] > best[rec["camera"]][:2]:
             best[rec["camera"]] = cand
     ranking = sorted(best, key=lambda c: (-best[c][0], -best[c][1]))
