@@ -194,8 +194,8 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
             if j == 0:
                 ax.set_ylabel(cam, fontsize=9)
     fig.suptitle(
-        f"{beacon.upper()} {options.sides[0]} side at {options.currents_mA[0]:g} mA, 240 mm square around "
-        "marker 1, saved JPEG, camera pixels shown as blocks"
+        f"{beacon.upper()} {options.sides[0]} side at {options.currents_mA[0]:g} mA, 240 mm square around marker 1\n"
+        "saved JPEG, camera pixels shown as blocks"
     )
     import io
 
