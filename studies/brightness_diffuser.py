@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
+from studies.common import StudyOptions, grid_conditions, sweep
 from studies.metrics import detection_success, wilson_interval
 from studies.report import Report
 
@@ -64,9 +64,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary."""
-    tasks = frame_tasks(conditions(options), options, estimators=["best"])
-    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, rows)
+    frame = sweep(NAME, conditions(options), options, out, workers=workers, scheduler=scheduler, estimators=["best"])
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
     _report(out, options, table, summary)

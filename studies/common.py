@@ -185,6 +185,20 @@ def run_frames(tasks: Sequence[dict], out: Path, **kwargs) -> list[dict]:
     return run_tasks(tasks, out, "studies.frame:simulate_frame", batch_key=render_batch_key, **kwargs)
 
 
+def sweep(
+    name: str,
+    conditions: Iterable[dict],
+    options: StudyOptions,
+    out: Path,
+    estimators: Sequence[str] | None = None,
+    **kwargs,
+) -> object:
+    """Frame tasks of ``conditions`` run (:func:`run_frames`, ``kwargs``: workers,
+    scheduler) and written as result tables; returns the DataFrame."""
+    tasks = frame_tasks(conditions, options, estimators=estimators)
+    return write_tables(out, run_frames(tasks, out, description=name, **kwargs))
+
+
 def write_tables(out: Path, rows: list[dict]) -> object:
     """results.csv and results.parquet (one row per frame × detector); returns the DataFrame."""
     import pandas as pd

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
+from studies.common import StudyOptions, grid_conditions, sweep
 from studies.max_range import estimate_max_range
 from studies.report import Report
 
@@ -51,9 +51,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary (``max_range`` records)."""
-    tasks = frame_tasks(conditions(options), options, estimators=["best"])
-    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, rows)
+    frame = sweep(NAME, conditions(options), options, out, workers=workers, scheduler=scheduler, estimators=["best"])
     records = []
     keys = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]
     for key, g in frame.groupby(keys, sort=True):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, frame_tasks, grid_conditions, run_frames, write_tables
+from studies.common import StudyOptions, grid_conditions, sweep
 from studies.max_range import estimate_max_range
 from studies.report import Report
 
@@ -63,9 +63,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary."""
-    tasks = frame_tasks(conditions(options), options, estimators=["best"])
-    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, rows)
+    frame = sweep(NAME, conditions(options), options, out, workers=workers, scheduler=scheduler, estimators=["best"])
     summary = {"study": NAME, "max_range": max_range_table(frame).to_dict("records")}
     configurations = configuration_table(frame)
     atomic_write_bytes(out / "configurations.csv", configurations.to_csv(index=False, float_format="%.6g").encode())

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
-from studies.common import StudyOptions, detection_curve, frame_tasks, grid_conditions, run_frames, write_tables
+from studies.common import StudyOptions, detection_curve, frame_tasks, grid_conditions, sweep
 from studies.max_range import estimate_max_range
 from studies.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.report import Report
@@ -62,9 +62,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 
 def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler: str | None = None) -> dict:
     """Run the study into ``out``; returns the summary."""
-    tasks = frame_tasks(conditions(options), options)
-    rows = run_frames(tasks, out, workers=workers, scheduler=scheduler, description=NAME)
-    frame = write_tables(out, rows)
+    frame = sweep(NAME, conditions(options), options, out, workers=workers, scheduler=scheduler)
     summary = analyse(frame)
     mosaic = mosaic_png(options, out)
     _report(out, options, frame, summary, mosaic)
