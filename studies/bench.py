@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -205,7 +206,7 @@ def workers_and_dask(tasks: int = 12) -> dict:
 
     from dask.distributed import LocalCluster
 
-    from studies.frame import simulate_frame
+    from studies.frame import FRAME_VERSION, simulate_frame
     from studies.runner import _run_pool, _worker_threads, run_tasks
 
     saved = os.environ.get("BEACON_SIM_CACHE")
@@ -240,7 +241,7 @@ def workers_and_dask(tasks: int = 12) -> dict:
                 else:
                     n = int(label[-1])
                     store = ResultStore(Path(tmp) / label / "tasks")
-                    batches = [{task_key("studies.frame:simulate_frame", t, 2): t} for t in work]
+                    batches = [{task_key("studies.frame:simulate_frame", t, FRAME_VERSION): t} for t in work]
                     with _worker_threads(n, 1):  # single-threaded worker processes
                         _run_pool(n, "studies.frame:simulate_frame", batches, store, lambda: None, force=True)
                 times[label] = time.perf_counter() - t0
@@ -276,13 +277,19 @@ def full_grid_estimate(batches: int = 12, seed: int = 0) -> dict:
     from studies.frame import render_batch_key, simulate_frame
 
     options = replication.default_options(quick=False)
-    tasks = frame_tasks(replication.conditions(options), options, estimators=["best"])
-    groups: dict[str, list[dict]] = {}
-    for t in tasks:
-        groups.setdefault(render_batch_key(t), []).append(t)
-    sample = random.Random(seed).sample(sorted(groups), batches)
+    currents = options.currents_mA
+    # one task per geometry and jittered pose names every render batch of the grid (the
+    # jitter does not depend on the drive), without building all 2.15 M frame tasks
+    geometries = [c for c in replication.conditions(options) if c["led_current_mA"] == currents[0]]
+    one_per_pose = replace(options, seeds=options.jitter_poses)
+    batch_geometry = {render_batch_key(t): g for g in geometries for t in frame_tasks([g], one_per_pose)}
+    sample = random.Random(seed).sample(sorted(batch_geometry), batches)
+    groups = {}
+    for key in sample:  # the batch's frames: every drive and seed of its geometry and pose
+        drives = [{**batch_geometry[key], "led_current_mA": c} for c in currents]
+        groups[key] = [t for t in frame_tasks(drives, options, estimators=["best"]) if render_batch_key(t) == key]
     work = [t for key in sample for t in groups[key]]
-    near_fields = {(t["scenario"]["foam"], t["scenario"]["paper_sheets"], t["scenario"]["side"]) for t in tasks}
+    near_fields = {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
     saved = os.environ.get("BEACON_SIM_CACHE")
     try:
         with tempfile.TemporaryDirectory() as tmp:
@@ -304,11 +311,11 @@ def full_grid_estimate(batches: int = 12, seed: int = 0) -> dict:
             os.environ.pop("BEACON_SIM_CACHE", None)
         else:
             os.environ["BEACON_SIM_CACHE"] = saved
-    scale = len(groups) / batches
+    scale = len(batch_geometry) / batches
     near_field_s = float(np.max(near_s)) * len(near_fields)  # the slowest as an upper bound per near field
     return {
-        "frames": len(tasks),
-        "render_batches": len(groups),
+        "frames": len(geometries) * len(currents) * options.seeds,
+        "render_batches": len(batch_geometry),
         "sampled_batches": batches,
         "sampled_frames": len(work),
         "sample_cold_s": cold,
