@@ -199,40 +199,90 @@ def sweep(
     return write_tables(out, run_frames(tasks, out, description=name, **kwargs))
 
 
-def write_tables(out: Path, rows: list[dict]) -> object:
-    """results.csv and results.parquet (one row per frame × detector); returns the DataFrame."""
+def sweep_in_chunks(
+    name: str,
+    chunks: Sequence[list[dict]],
+    options: StudyOptions,
+    out: Path,
+    estimators: Sequence[str] | None = None,
+    **kwargs,
+) -> object:
+    """:func:`sweep` for grids too large to hold as row dicts (millions of frames).
+
+    Each chunk of conditions (whole geometries, so no render batch straddles two chunks)
+    is made into tasks, run and reduced to a DataFrame with categorical text columns
+    before the next one starts, so the parent holds one chunk's tasks and rows at a time
+    (about 4 kB per row as dicts, about 0.5 kB as columns). A finished chunk's table is
+    stored under ``out/chunks`` keyed by the content of its tasks, so a re-run whose
+    results are all stored reads 1 file per chunk instead of one per frame.
+    """
     import pandas as pd
 
-    frame = pd.DataFrame(rows)
-    csv = frame.to_csv(index=False, float_format="%.9g").encode()
-    atomic_write_bytes(out / "results.csv", csv)
+    from scenes.render_cache import content_key
+    from studies.frame import FRAME_VERSION
+
+    parts = []
+    for i, conditions in enumerate(chunks):
+        tasks = frame_tasks(conditions, options, estimators=estimators)
+        path = Path(out) / "chunks" / f"{content_key('chunk', FRAME_VERSION, tasks)}.parquet"
+        if path.is_file():
+            parts.append(pd.read_parquet(path))
+            continue
+        rows = run_frames(tasks, out, description=f"{name} {i + 1}/{len(chunks)}", **kwargs)
+        part = pd.DataFrame(rows)
+        del rows
+        for column in part.select_dtypes(include=["object", "str"]).columns:
+            part[column] = part[column].astype("category")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, _parquet_bytes(part))
+        parts.append(pd.read_parquet(path))  # as a re-run reads it: cold and warm runs agree
+    frame = pd.concat(parts, ignore_index=True)
+    for column in frame.select_dtypes(include="category").columns:  # back to the dtype of its values
+        frame[column] = frame[column].astype(frame[column].cat.categories.dtype)
+    return write_tables(out, frame)
+
+
+CSV_MAX_ROWS = 1_000_000
+"""Above this many rows only results.parquet is written (a CSV would take gigabytes)."""
+
+
+def write_tables(out: Path, rows) -> object:
+    """results.parquet and, up to :data:`CSV_MAX_ROWS` rows, results.csv (one row per
+    frame × detector) from row dicts or a DataFrame; returns the DataFrame."""
+    import pandas as pd
+
+    frame = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows)
+    Path(out).mkdir(parents=True, exist_ok=True)
+    csv_path = Path(out) / "results.csv"
+    if len(frame) <= CSV_MAX_ROWS:
+        atomic_write_bytes(csv_path, frame.to_csv(index=False, float_format="%.9g").encode())
+    else:
+        csv_path.unlink(missing_ok=True)  # never leave an earlier run's table beside this one
+    atomic_write_bytes(Path(out) / "results.parquet", _parquet_bytes(frame))
+    return frame
+
+
+def _parquet_bytes(frame) -> bytes:
     import io
 
     buf = io.BytesIO()
     frame.to_parquet(buf, index=False)
-    atomic_write_bytes(out / "results.parquet", buf.getvalue())
-    return frame
+    return buf.getvalue()
 
 
 def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
     """Per group and x: frames, correct detections, Wilson 95 % interval."""
     import pandas as pd
 
-    from studies.metrics import detection_success, wilson_interval
+    from studies.metrics import wilson_intervals
 
-    frame = frame.assign(success=[detection_success(r) for r in frame.to_dict("records")])
-    out = []
-    for key, group in frame.groupby([*by, x], sort=True):
-        k, n = int(group["success"].sum()), len(group)
-        p, lo, hi = wilson_interval(k, n)
-        out.append(
-            {
-                **dict(zip([*by, x], key if isinstance(key, tuple) else (key,), strict=True)),
-                "frames": n,
-                "detected": k,
-                "p_detect": p,
-                "p_low": lo,
-                "p_high": hi,
-            }
-        )
-    return pd.DataFrame(out)
+    keys = [*by, x]
+    # detection_success, column-wise: right side, five markers, all correctly numbered
+    success = np.logical_and.reduce([frame[c].astype(bool) for c in ("detected", "side_correct", "numbering_correct")])
+    success = pd.Series(success, index=frame.index)
+    counts = success.groupby([frame[k] for k in keys], sort=True).agg(["size", "sum"])
+    table = counts.reset_index().rename(columns={"size": "frames", "sum": "detected"})
+    table["frames"] = table["frames"].astype(int)
+    table["detected"] = table["detected"].astype(int)
+    table["p_detect"], table["p_low"], table["p_high"] = wilson_intervals(table["detected"], table["frames"])
+    return table[[*keys, "frames", "detected", "p_detect", "p_low", "p_high"]]

@@ -32,6 +32,20 @@ from scipy.special import expit
 from studies.metrics import detection_success
 
 CAUSES = ("resolution / merging", "signal-to-noise", "colour", "saturation", "pose")
+COLUMNS = (
+    "range_m",
+    "nominal_range_m",
+    "detected",
+    "side_correct",
+    "numbering_correct",
+    "range_err_m",
+    "yaw_err_deg",
+    "reason",
+    "core_saturated_fraction_mean",
+    "marker_spacing_px",
+    "core_diameter_px",
+)
+"""The row fields the estimate reads (a table can be cut to these before making row dicts)."""
 LN19 = math.log(19.0)
 
 

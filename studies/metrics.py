@@ -22,16 +22,30 @@ def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tu
     """
     if trials < 0 or not 0 <= successes <= trials:
         raise ValueError(f"successes: expected 0 <= successes <= trials, got {successes}/{trials}")
-    if trials == 0:
-        return math.nan, 0.0, 1.0
+    p, low, high = wilson_intervals(np.array([successes]), np.array([trials]), confidence)
+    return float(p[0]), float(low[0]), float(high[0])
+
+
+def wilson_intervals(
+    successes: ArrayLike, trials: ArrayLike, confidence: float = 0.95
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`wilson_interval` for arrays of counts (checked by the caller): (p̂, low, high)."""
     from scipy.stats import norm
 
+    k = np.asarray(successes, dtype=np.float64)
+    n = np.asarray(trials, dtype=np.float64)
     z = float(norm.ppf(0.5 + confidence / 2))
-    p = successes / trials
-    denom = 1 + z * z / trials
-    centre = (p + z * z / (2 * trials)) / denom
-    half = z * math.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / denom
-    return p, max(0.0, centre - half), min(1.0, centre + half)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = k / n
+        denom = 1 + z * z / n
+        centre = (p + z * z / (2 * n)) / denom
+        half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    empty = n == 0
+    return (
+        np.where(empty, np.nan, p),
+        np.where(empty, 0.0, np.maximum(0.0, centre - half)),
+        np.where(empty, 1.0, np.minimum(1.0, centre + half)),
+    )
 
 
 def detection_success(row: dict) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -143,3 +144,65 @@ def test_threshold_overlap_detection():
     assert validate.overlapping_colours(study) == ["blue/green"]
     wide = {"red": [[[0, 0, 100], [179, 255, 255]]], "green": [[[60, 50, 100], [80, 255, 255]]]}
     assert validate.overlapping_colours(wide) == ["green/red"]
+
+
+def _fake_rows(tasks):
+    """Rows as simulate_frame shapes them (text, None, bool, int, float, NaN), per task."""
+    rows = []
+    for t in tasks:
+        sc, seed = t["scenario"], t["seed"]
+        for tracker in ("thesis", "best"):
+            r = sc["range_m"]  # all at 2 m, half at 5 m, none at 9 m: a finite logistic fit
+            ok = tracker == "best" and (r < 4 or (r < 7 and seed % 2 == 0))
+            rows.append(
+                {
+                    **sc,
+                    "seed": seed,
+                    "nominal_range_m": t["nominal"]["range_m"],
+                    "tracker": tracker,
+                    "detected": ok,
+                    "side_correct": ok,
+                    "numbering_correct": ok,
+                    "side_detected": sc["side"] if ok else None,
+                    "range_err_m": 0.01 * seed if ok else float("nan"),
+                    "yaw_err_deg": 0.1 * seed if ok else float("nan"),
+                    "reason": "" if ok else "red: 3 blob(s), 2 marker(s) lost or merged",
+                }
+            )
+    return rows
+
+
+def test_chunked_sweep_equals_one_sweep_and_rereads_only_chunk_tables(tmp_path, monkeypatch):
+    from studies import common
+
+    o = replication.default_options(True).with_overrides(ranges_m=(2.0, 5.0, 9.0), seeds=3)
+    calls = []
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: calls.append(len(tasks)) or _fake_rows(tasks))
+    whole = common.sweep("x", replication.conditions(o), o, tmp_path / "whole")
+    chunked = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert len(replication.chunks(o)) == 4 and sum(calls[1:]) == calls[0] == len(whole) // 2
+    pd.testing.assert_frame_equal(whole, chunked, check_exact=True)
+    # a re-run with every chunk stored reads 4 tables and runs no frame, and gives the same bytes
+    before = (tmp_path / "chunked" / "results.parquet").read_bytes()
+    calls.clear()
+    again = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert calls == [] and (tmp_path / "chunked" / "results.parquet").read_bytes() == before
+    pd.testing.assert_frame_equal(again, chunked, check_exact=True)
+    # above CSV_MAX_ROWS only parquet is written, and an older CSV is removed
+    monkeypatch.setattr(common, "CSV_MAX_ROWS", 10)
+    common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert not (tmp_path / "chunked" / "results.csv").exists()
+    assert len(pd.read_parquet(tmp_path / "chunked" / "results.parquet")) == len(whole)
+
+
+def test_replication_max_range_fits_in_a_pool_equal_the_fits_in_process(tmp_path, monkeypatch):
+    from studies import common
+
+    o = replication.default_options(True).with_overrides(
+        cameras=("logitech-c270",), diffusers=((True, 1, "matched"),), ranges_m=(2.0, 5.0, 9.0), seeds=3
+    )
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: _fake_rows(tasks))
+    frame = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path)
+    one, two = replication.max_range_table(frame, workers=1), replication.max_range_table(frame, workers=2)
+    assert len(one) == 2 and np.all((one.max_range_m > 2) & (one.max_range_m < 9))  # one per drive
+    pd.testing.assert_frame_equal(one, two, check_exact=True)
