@@ -123,25 +123,49 @@ def cross_candidates(uv) -> list[NDArray[np.int64]]:
     two diagonals cross (a convex quadrilateral).
     """
     pts = np.asarray(uv, dtype=np.float64)
-    out = []
+    return list(cross_candidates_many(pts[None])[1])
+
+
+def cross_candidates_many(points) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`cross_candidates` of many five-point sets at once, shape (S, 5, 2).
+
+    Returns (set index, numbering) of every candidate, ordered by set and then by the
+    centre's index, as the one-set function lists them; the arithmetic is the same, so
+    the results are identical.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    sets = np.arange(len(pts))
+    found = []
     for centre in range(5):
-        others = [i for i in range(5) if i != centre]
-        q = pts[others]
-        ang = np.arctan2(*(q - q.mean(axis=0)).T[::-1])
-        ring = [others[i] for i in np.argsort(ang)]
-        d1, d2 = (ring[0], ring[2]), (ring[1], ring[3])
-        if not _segments_cross(pts[d1[0]], pts[d1[1]], pts[d2[0]], pts[d2[1]]):
-            continue
-        dir1, dir2 = pts[d1[1]] - pts[d1[0]], pts[d2[1]] - pts[d2[0]]
-        hor, ver = (d1, d2) if abs(dir1[0]) * abs(dir2[1]) >= abs(dir1[1]) * abs(dir2[0]) else (d2, d1)
-        two, three = sorted(hor, key=lambda i: -pts[i, 0])
-        four, five = sorted(ver, key=lambda i: pts[i, 1])
-        out.append(np.array([centre, two, three, four, five]))
-    return out
+        others = np.array([i for i in range(5) if i != centre])
+        q = pts[:, others]
+        rel = q - q.mean(axis=1, keepdims=True)
+        order = np.argsort(np.arctan2(rel[..., 1], rel[..., 0]), axis=1)
+        ring = others[order]  # (S, 4) point indices around the centre
+        at = [pts[sets, ring[:, k]] for k in range(4)]
+        cross = _segments_cross(at[0], at[2], at[1], at[3])
+        dir1, dir2 = at[2] - at[0], at[3] - at[1]
+        first_horizontal = np.abs(dir1[:, 0]) * np.abs(dir2[:, 1]) >= np.abs(dir1[:, 1]) * np.abs(dir2[:, 0])
+        hor = np.where(first_horizontal[:, None], ring[:, [0, 2]], ring[:, [1, 3]])
+        ver = np.where(first_horizontal[:, None], ring[:, [1, 3]], ring[:, [0, 2]])
+        hx = pts[sets[:, None], hor, 0]
+        vy = pts[sets[:, None], ver, 1]
+        swap_h = ~(-hx[:, 0] <= -hx[:, 1])  # a stable sort by -x keeps the pair's order on ties
+        swap_v = ~(vy[:, 0] <= vy[:, 1])  # … and by y
+        two, three = np.where(swap_h, hor[:, 1], hor[:, 0]), np.where(swap_h, hor[:, 0], hor[:, 1])
+        four, five = np.where(swap_v, ver[:, 1], ver[:, 0]), np.where(swap_v, ver[:, 0], ver[:, 1])
+        numbered = np.stack([np.full(len(pts), centre), two, three, four, five], axis=1)
+        found.append((np.flatnonzero(cross), numbered[cross]))
+    which = np.concatenate([w for w, _ in found])
+    numbered = np.concatenate([n for _, n in found]).reshape(-1, 5)
+    order = np.argsort(which, kind="stable")  # by set, then by centre
+    return which[order], numbered[order]
 
 
-def _segments_cross(a, b, c, d) -> bool:
+def _segments_cross(a, b, c, d):
+    """Whether segments ab and cd cross properly (points (..., 2))."""
+
     def orient(p, q, r):
-        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
 
-    return orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0
+    return (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from pipeline.angles import Intrinsics
 from pipeline.image_io import as_bgr, to_float
-from pipeline.markers import Blob, TrackResult, cross_candidates
+from pipeline.markers import Blob, TrackResult, cross_candidates_many
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.led import SIDE_COLOURS
 
@@ -269,16 +269,17 @@ def best_five(blobs: list[Blob], design: BeaconDesign, intrinsics: Intrinsics, s
     if len(cands) < 5:
         return None
     k = intrinsics.matrix()
+    uv = np.array([[c.u, c.v] for c in cands])
+    subsets = np.array(list(itertools.combinations(range(len(cands)), 5)))
     best = None
-    for subset in itertools.combinations(range(len(cands)), 5):
-        pts = np.array([[cands[i].u, cands[i].v] for i in subset])
-        for idx in cross_candidates(pts):
-            numbered = pts[idx]
-            if not _plausible(numbered):
-                continue
-            rms = _fit(numbered, design, k)
-            if best is None or rms < best.rms_px:
-                best = _Fit(rms, numbered, [cands[subset[i]] for i in idx])
+    for which, idx in zip(*cross_candidates_many(uv[subsets]), strict=True):
+        subset = subsets[which]
+        numbered = uv[subset][idx]
+        if not _plausible(numbered):
+            continue
+        rms = _fit(numbered, design, k)
+        if best is None or rms < best.rms_px:
+            best = _Fit(rms, numbered, [cands[subset[i]] for i in idx])
     if best is None:
         return None
     size = float(np.ptp(best.uv, axis=0).max())

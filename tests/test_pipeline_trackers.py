@@ -239,3 +239,38 @@ def test_numbering_rules_at_large_yaw(yaw_deg):
     study_ok = bool(np.array_equal(number_study(az, el), np.arange(5)))
     assert study_ok == (yaw_deg < np.degrees(np.arctan(70 / 46)))
     assert any(np.array_equal(cand, np.arange(5)) for cand in cross_candidates(uv))
+
+
+def _cross_candidates_one_by_one(pts):
+    """Reference: the numbering rule written point set by point set, in plain Python."""
+
+    def orient(p, q, r):
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    out = []
+    for centre in range(5):
+        others = [i for i in range(5) if i != centre]
+        q = pts[others]
+        ring = [others[i] for i in np.argsort(np.arctan2(*(q - q.mean(axis=0)).T[::-1]))]
+        a, b, c, d = pts[ring[0]], pts[ring[2]], pts[ring[1]], pts[ring[3]]
+        if not (orient(a, b, c) * orient(a, b, d) < 0 and orient(c, d, a) * orient(c, d, b) < 0):
+            continue
+        d1, d2 = (ring[0], ring[2]), (ring[1], ring[3])
+        dir1, dir2 = b - a, d - c
+        hor, ver = (d1, d2) if abs(dir1[0]) * abs(dir2[1]) >= abs(dir1[1]) * abs(dir2[0]) else (d2, d1)
+        two, three = sorted(hor, key=lambda i: -pts[i, 0])
+        four, five = sorted(ver, key=lambda i: pts[i, 1])
+        out.append([centre, two, three, four, five])
+    return out
+
+
+def test_cross_candidates_of_many_sets_equal_the_one_by_one_rule():
+    from pipeline.markers import cross_candidates_many
+
+    rng = np.random.default_rng(7)
+    sets = rng.normal(size=(3000, 5, 2)) * 40
+    sets[:500] = np.round(sets[:500] / 10)  # ties in x, y and angle on a coarse grid
+    which, numbered = cross_candidates_many(sets)
+    expected = [(s, c) for s, pts in enumerate(sets) for c in _cross_candidates_one_by_one(pts)]
+    assert len(expected) > 3000
+    assert [(int(w), list(map(int, n))) for w, n in zip(which, numbered, strict=True)] == expected
