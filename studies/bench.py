@@ -353,3 +353,75 @@ def variant_ratio() -> dict:
         name, seconds = proc.stdout.split()[-2:]
         out["scalar" if backend else "fast"] = {"variant": name, "seconds": float(seconds)}
     return {**out, "ratio": out["scalar"]["seconds"] / out["fast"]["seconds"]}
+
+
+def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: int = 16) -> dict:
+    """The replication study's table work at the full grid's size: tasks, content keys,
+    chunk tables and results.parquet (:func:`studies.common.sweep_in_chunks`), run twice
+    into a temporary directory — the second time with every chunk stored, as a re-run
+    with a warm cache is — and the max-range fits, timed on ``fit_groups`` of the grid's
+    768 groups and scaled to all of them on ``workers`` processes.
+
+    Frames are not simulated: each task's rows are stand-ins, the rows of one of
+    ``template_tasks`` simulated frames of the grid (cycled) with the task's own
+    scenario, seed and nominal pose, so the tables have the real columns and types (the
+    fits' times depend on the outcomes, so they are indicative). Returns wall times (s),
+    the parent's peak resident memory (MiB) and the table's size.
+    """
+    import random
+    import resource
+    from unittest import mock
+
+    from studies import common, replication
+    from studies.frame import simulate_frame
+
+    options = replication.default_options(quick=False)
+    rng = random.Random(0)
+    one = [  # random single conditions of the grid
+        replace(options, **{field: (rng.choice(getattr(options, field)),) for field in common.GRID_AXES.values()})
+        for _ in range(template_tasks)
+    ]
+    conditions = [c for o in one for c in replication.conditions(o)]
+    tasks = common.frame_tasks(conditions, replace(options, seeds=1), estimators=["best"])
+    template_rows = [simulate_frame(t) for t in tasks]
+    rss_templates = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+    def stand_in(tasks, out, **kwargs):
+        rows = []
+        for i, t in enumerate(tasks):
+            for row in template_rows[i % len(template_rows)]:
+                rows.append(
+                    {
+                        **row,
+                        **t["scenario"],
+                        "seed": t["seed"],
+                        "nominal_range_m": t["nominal"]["range_m"],
+                        "nominal_yaw_deg": t["nominal"]["yaw_deg"],
+                    }
+                )
+        return rows
+
+    times = {}
+    with tempfile.TemporaryDirectory() as tmp, mock.patch.object(common, "run_frames", stand_in):
+        for label in ("first", "rerun"):
+            t0 = time.perf_counter()
+            frame = common.sweep_in_chunks("replication", replication.chunks(options), options, Path(tmp))
+            times[label] = time.perf_counter() - t0
+    keys = ["camera", "beacon", "foam", "paper_sheets", "led_current_mA"]
+    groups = frame[frame.tracker == "best"].groupby(keys, sort=True)
+    sample = rng.sample(sorted(groups.groups), fit_groups)
+    t0 = time.perf_counter()
+    for key in sample:
+        replication._max_range(groups.get_group(key))
+    fit_s = (time.perf_counter() - t0) / fit_groups
+    return {
+        "frames": len(frame) // 2,
+        "rows": len(frame),
+        "columns": frame.shape[1],
+        "tables_first_run_s": times["first"],
+        "tables_rerun_s": times["rerun"],
+        "fit_s_per_group": fit_s,
+        "fits_s_on_workers": fit_s * groups.ngroups / workers,
+        "parent_peak_rss_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "parent_peak_rss_after_templates_MiB": rss_templates,
+    }

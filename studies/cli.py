@@ -204,10 +204,22 @@ def render(
 def bench(
     json_out: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     skip_scalar: Annotated[bool, typer.Option("--skip-scalar", help="Skip the slow scalar-variant timing.")] = False,
+    grid_tables: Annotated[
+        bool,
+        typer.Option(
+            "--grid-tables",
+            help="Instead: time the replication study's tables at the full grid's size (stand-in frames, ~6 min).",
+        ),
+    ] = False,
 ) -> None:
     """Measure speed-ups as ratios, side by side in one run on this machine."""
     from scenes.mitsuba_variant import active_variant
     from studies import bench as b
+
+    if grid_tables:
+        with console.status("bench: replication tables at full size ..."):
+            print(json.dumps(b.replication_tables(), indent=2))
+        return
 
     steps = [
         ("two_stage_vs_brute_force", b.two_stage_vs_brute_force),

@@ -99,19 +99,20 @@ def max_range_table(frame, workers: int | None = None):
 
     keys = ["camera", "beacon", "foam", "paper_sheets", "led_current_mA"]
     best = frame[frame.tracker == "best"]
-    groups = [(key, g[[c for c in COLUMNS if c in g]].to_dict("records")) for key, g in best.groupby(keys, sort=True)]
+    # groups travel as small column tables, made into row dicts one at a time where fitted
+    groups = [(key, g[[c for c in COLUMNS if c in g]]) for key, g in best.groupby(keys, sort=True)]
     n = min(workers or os.cpu_count() or 1, len(groups))
     if n > 1:
         with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
-            fits = list(pool.map(_max_range, [rows for _, rows in groups], chunksize=4))
+            fits = list(pool.map(_max_range, [g for _, g in groups], chunksize=4))
     else:
-        fits = [_max_range(rows) for _, rows in groups]
+        fits = [_max_range(g) for _, g in groups]
     labels = [dict(zip(keys, key, strict=True)) for key, _ in groups]
     return pd.DataFrame([{**label, **fit} for label, fit in zip(labels, fits, strict=True)])
 
 
-def _max_range(rows: list[dict]) -> dict:
-    return estimate_max_range(rows, bootstrap=100).to_dict()
+def _max_range(group) -> dict:
+    return estimate_max_range(group.to_dict("records"), bootstrap=100).to_dict()
 
 
 def configuration_table(frame):
