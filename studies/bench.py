@@ -407,8 +407,7 @@ def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: in
             t0 = time.perf_counter()
             frame = common.sweep_in_chunks("replication", replication.chunks(options), options, Path(tmp))
             times[label] = time.perf_counter() - t0
-    keys = ["camera", "beacon", "foam", "paper_sheets", "led_current_mA"]
-    groups = frame[frame.tracker == "best"].groupby(keys, sort=True)
+    groups = frame[frame.tracker == "best"].groupby(list(replication.MAX_RANGE_BY), sort=True)
     sample = rng.sample(sorted(groups.groups), fit_groups)
     t0 = time.perf_counter()
     for key in sample:

@@ -26,6 +26,8 @@ from studies.report import Report
 NAME = "replication"
 DRIVES_MA = tuple(float(f"{c:.3g}") for c in np.geomspace(0.5, 20.0, 8))
 """Eight LED drive levels, log-spaced from a deep dimming (0.5 mA) to the datasheet 20 mA."""
+MAX_RANGE_BY = ("camera", "beacon", "foam", "paper_sheets", "led_current_mA")
+"""The groups the maximum range is estimated for (pooling sides, yaws and seeds)."""
 DIFFUSERS = tuple((foam, n, "matched" if n else "white") for foam in (False, True) for n in range(6))
 
 
@@ -88,7 +90,8 @@ def run(out: Path, options: StudyOptions, workers: int | None = None, scheduler:
 def max_range_table(frame, workers: int | None = None):
     """Maximum range per camera × beacon × diffuser × drive (best tracker and estimator),
     pooling every side and yaw: the range within which all of them are localised.
-    The groups' fits (768 in the full grid, ~0.6 s each) run on ``workers`` processes."""
+    The groups' fits (768 in the full grid, 0.6-15 s each, depending on the outcomes)
+    run on ``workers`` processes."""
     import os
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
@@ -97,7 +100,7 @@ def max_range_table(frame, workers: int | None = None):
 
     from studies.max_range import COLUMNS
 
-    keys = ["camera", "beacon", "foam", "paper_sheets", "led_current_mA"]
+    keys = list(MAX_RANGE_BY)
     best = frame[frame.tracker == "best"]
     # groups travel as small column tables, made into row dicts one at a time where fitted
     groups = [(key, g[[c for c in COLUMNS if c in g]]) for key, g in best.groupby(keys, sort=True)]
