@@ -411,7 +411,7 @@ def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: in
     sample = rng.sample(sorted(groups.groups), fit_groups)
     t0 = time.perf_counter()
     for key in sample:
-        replication._max_range(groups.get_group(key))
+        replication.group_max_range(groups.get_group(key))
     fit_s = (time.perf_counter() - t0) / fit_groups
     return {
         "frames": len(frame) // 2,

@@ -274,12 +274,10 @@ def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
     """Per group and x: frames, correct detections, Wilson 95 % interval."""
     import pandas as pd
 
-    from studies.metrics import wilson_intervals
+    from studies.metrics import detection_successes, wilson_intervals
 
     keys = [*by, x]
-    # detection_success, column-wise: right side, five markers, all correctly numbered
-    success = np.logical_and.reduce([frame[c].astype(bool) for c in ("detected", "side_correct", "numbering_correct")])
-    success = pd.Series(success, index=frame.index)
+    success = pd.Series(detection_successes(frame), index=frame.index)
     counts = success.groupby([frame[k] for k in keys], sort=True).agg(["size", "sum"])
     table = counts.reset_index().rename(columns={"size": "frames", "sum": "detected"})
     table["frames"] = table["frames"].astype(int)

@@ -54,6 +54,11 @@ def detection_success(row: dict) -> bool:
     return bool(row.get("detected")) and bool(row.get("side_correct")) and bool(row.get("numbering_correct"))
 
 
+def detection_successes(frame) -> NDArray[np.bool_]:
+    """:func:`detection_success` of every row of a results table (column-wise)."""
+    return np.logical_and.reduce([frame[c].astype(bool) for c in ("detected", "side_correct", "numbering_correct")])
+
+
 # -- colour ------------------------------------------------------------------------------
 def rgb_chromaticity(rgb_linear: ArrayLike) -> NDArray[np.float64]:
     """Chromaticity (r, g) = (R, G) / (R + G + B) of linear RGB values, shape (..., 2)."""

@@ -107,14 +107,15 @@ def max_range_table(frame, workers: int | None = None):
     n = min(workers or os.cpu_count() or 1, len(groups))
     if n > 1:
         with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
-            fits = list(pool.map(_max_range, [g for _, g in groups], chunksize=4))
+            fits = list(pool.map(group_max_range, [g for _, g in groups], chunksize=4))
     else:
-        fits = [_max_range(g) for _, g in groups]
+        fits = [group_max_range(g) for _, g in groups]
     labels = [dict(zip(keys, key, strict=True)) for key, _ in groups]
     return pd.DataFrame([{**label, **fit} for label, fit in zip(labels, fits, strict=True)])
 
 
-def _max_range(group) -> dict:
+def group_max_range(group) -> dict:
+    """Maximum range (:class:`studies.max_range.MaxRange` as a dict) of one group's table."""
     return estimate_max_range(group.to_dict("records"), bootstrap=100).to_dict()
 
 
