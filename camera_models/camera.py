@@ -1,7 +1,7 @@
 """A camera = geometry + lens + body (sensor, image processing, exposure), loaded from data.
 
 ``camera_models/data/<name>.toml`` holds the pixel grid (``[geometry]``, read by
-:mod:`camera_models.geometry`) and the lens (``[optics]``); its ``body`` names
+:mod:`scenes.view`) and the lens (``[optics]``); its ``body`` names
 ``camera_models/data/bodies/<body>.toml`` with ``[sensor]``, ``[isp]`` and ``[exposure]``.
 Every number carries a ``source`` or an ``assumed`` note (:func:`scenes.sourced.load_sourced`).
 """
@@ -13,12 +13,13 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
+import colour
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.geometry import CAMERA_DATA_DIR, CameraGeometry, camera_geometry, camera_names
 from scenes import spectra
 from scenes.sourced import load_sourced
+from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry, camera_names
 
 BODY_DIR = CAMERA_DATA_DIR / "bodies"
 SSF_DIR = CAMERA_DATA_DIR / "ssf"
@@ -227,7 +228,6 @@ def camera_to_xyz_from_ssf(qe_rgb: NDArray[np.float64]) -> NDArray[np.float64]:
     ``colour.matrix_idt`` fits camera RGB (white-balanced under D65) to ACES2065-1 over
     its training reflectances; ACES2065-1 → XYZ then gives camera → XYZ.
     """
-    import colour
 
     shape = colour.SpectralShape(380, 720, 1)
     msds = colour.MultiSpectralDistributions(

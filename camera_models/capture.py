@@ -24,8 +24,9 @@ from camera_models.optics import (
     optical_image,
     relative_illumination,
 )
-from camera_models.sensor import SensorSettings, expose, mosaic
+from camera_models.sensor import SensorSettings, cfa_channels, expose, mosaic
 from scenes.radiance import SpectralRadiance
+from scenes.view import project
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,6 @@ def capture(
 
 def marker_pixels(camera: Camera, scenario) -> NDArray[np.float64]:
     """Where the real (distorting) lens images markers 1-5, (5, 2) camera pixels."""
-    from camera_models.geometry import project
 
     uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
     return RadialMapping(camera).distort_points_px(uv)
@@ -180,7 +180,6 @@ def marker_core_saturation(cap: Capture, camera: Camera, scenario) -> list[dict]
     ``saturated_fraction`` counts every pixel of the core; ``saturated_fraction_cfa``
     splits it by colour filter (R, G, B sites of the mosaic; NaN where the core has none).
     """
-    from camera_models.sensor import cfa_channels
 
     uv = marker_pixels(camera, scenario)
     depth = scenario.camera_pose().world_to_camera(scenario.marker_positions_world_m())[:, 2]

@@ -19,7 +19,6 @@ reference implementation (PyPI ``emva1288``):
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +27,7 @@ import numpy as np
 
 from camera_models.camera import Camera
 from camera_models.optics import photons_per_joule
-from camera_models.sensor import SensorSettings, cfa_channels, emva_saturation_e, expose
+from camera_models.sensor import SensorSettings, cfa_channels, emva_saturation_e, expose, mosaic
 from scenes import spectra
 
 
@@ -102,7 +101,6 @@ def write_dataset(camera: Camera, analog_gain: float, out: Path, seed: int = 0, 
 
     def frame(mu_photons: float, t_s: float) -> str:
         mean_rgb = np.broadcast_to(qe_rgb * mu_photons, (2 * n, 2 * n, 3))
-        from camera_models.sensor import mosaic
 
         raw = expose(
             mosaic(np.asarray(mean_rgb), s.cfa), s, SensorSettings(t_s, analog_gain), seed * 100003 + counter[0]
@@ -133,20 +131,3 @@ def write_dataset(camera: Camera, analog_gain: float, out: Path, seed: int = 0, 
     )
     (out / "truth.json").write_text(json.dumps(truth, indent=2), encoding="utf-8")
     return truth
-
-
-REFERENCE_SCRIPT = """
-import json, logging, sys
-from emva1288.process import ParseEmvaDescriptorFile, LoadImageData, Data1288, Results1288
-p = ParseEmvaDescriptorFile(sys.argv[1], loglevel=logging.ERROR)
-d = Data1288(LoadImageData(p.images, loglevel=logging.ERROR).data, loglevel=logging.ERROR)
-r = Results1288(d.data, pixel_area=float(sys.argv[2]), loglevel=logging.ERROR)
-print(json.dumps({"qe": r.QE / 100.0, "K_DN_per_e": r.K, "dark_noise_e": r.sigma_d, "saturation_e": r.u_e_sat}))
-"""
-"""Runs in a separate interpreter that has ``emva1288`` (which needs numpy < 2)."""
-
-
-def relative_errors(measured: dict, truth: dict) -> dict[str, float]:
-    """(measured − true) / true for the four EMVA quantities."""
-    keys = ("qe", "K_DN_per_e", "dark_noise_e", "saturation_e")
-    return {k: (measured[k] - truth[k]) / truth[k] for k in keys if math.isfinite(measured[k])}

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal, special
+from scipy import ndimage, signal, special
 
 from camera_models.camera import Camera, LensModel
 from scenes import spectra
@@ -270,7 +270,6 @@ def distortion_resample(image: NDArray[np.float32], grid: PixelGrid, camera: Cam
     Each output sub-pixel centre is mapped to its undistorted position; radiance is
     conserved along rays, so values are taken, not rescaled. Outside the render: 0.
     """
-    from scipy import ndimage
 
     u, v = grid.subpixel_centres_px()
     uu, vv = np.meshgrid(u, v)

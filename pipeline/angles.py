@@ -1,6 +1,6 @@
 """Pixels to angles and lines of sight: the study's formula and the exact pinhole.
 
-The study (THESIS_FACTS §5.7), with W × H the processed image, N × M the full sensor
+The study (docs/source-study.md §5.7), with W × H the processed image, N × M the full sensor
 resolution, p the pixel pitch and f the focal length::
 
     α = atan(((W/2 − u)/(W/2)) · (N/2)·p / f)     azimuth, positive to the left
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.geometry import CameraGeometry
 from pipeline.frames import CS_FROM_CV
+from scenes.view import CameraGeometry
 
 
 @dataclass(frozen=True)

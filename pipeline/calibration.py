@@ -1,4 +1,4 @@
-"""Checkerboard camera calibration and undistortion (THESIS_FACTS §10).
+"""Checkerboard camera calibration and undistortion (docs/source-study.md §10).
 
 The study calibrated with a board of 6 × 8 inner corners and 24.4 mm squares, 46 to 299
 photos, OpenCV ``calibrateCamera``, and undistorted with alpha 0 (only valid pixels,

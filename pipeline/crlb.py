@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.geometry import camera_geometry
 from pipeline.angles import Intrinsics
 from pipeline.frames import Pose, pose_from_scenario
+from scenes.view import camera_geometry
 
 
 def _skew(x: NDArray[np.float64]) -> NDArray[np.float64]:

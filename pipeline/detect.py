@@ -5,7 +5,7 @@
 ``best``: :func:`pipeline.pose.pnp_pose`) on a BGR image, optionally undistorted with a
 calibration first, and returns a :class:`Detection` whose :meth:`Detection.to_dict` is
 the CLI's JSON. It never raises on image content: an image it cannot use gives "no
-target" with a reason. Bad arguments (camera name, tracker name, alpha) raise
+target" with a reason and a failure code. Bad arguments (tracker name, alpha, calibration size) raise
 ``ValueError`` naming the field.
 
 Pixel coordinates reported are full-frame, full-resolution pixels of the image as given
@@ -17,13 +17,14 @@ Angles are the tracker's: the study's formula for the study's tracker, the pinho
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from numpy.typing import NDArray
 
-from camera_models.geometry import camera_geometry
 from pipeline.angles import Intrinsics, pinhole_angles, study_angles, study_unit_vectors
 from pipeline.calibration import Calibration, distort_points, new_camera_matrix, undistort
+from pipeline.failures import Failure
 from pipeline.frames import Pose, global_pose
 from pipeline.image_io import as_bgr
 from pipeline.markers import TrackResult
@@ -32,10 +33,8 @@ from pipeline.pose import pnp_pose
 from pipeline.thesis_pose import thesis_pose_from_vectors
 from pipeline.thesis_tracker import ThesisTrackerSettings, thesis_track
 from pipeline.tracker import TrackerSettings, track
-from scenes.beacon import beacon_design
-
-TRACKERS = ("thesis", "best")
-ESTIMATORS = ("thesis", "best")
+from scenes.beacon import BeaconDesign, beacon_design
+from scenes.led import SIDE_COLOURS
 
 
 @dataclass
@@ -62,6 +61,10 @@ class Detection:
         The study's LEDPoints message when the side and angles are known.
     sigma
         1-σ uncertainties of the best estimator (range_m, attitude_deg, lateral_m), or {}.
+    failure
+        The code of ``reason`` when there is no complete answer (:class:`pipeline.failures.Failure`), else None.
+    blob_counts
+        Blobs the tracker found per side colour.
     """
 
     side: str | None
@@ -74,10 +77,18 @@ class Detection:
     notes: list[str] = field(default_factory=list)
     led_points: LEDPoints | None = None
     sigma: dict = field(default_factory=dict)
+    failure: Failure | None = None
+    blob_counts: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """The CLI's JSON fields."""
-        out = {"side": self.side, "reason": self.reason, "tracker": self.tracker, "estimator": self.estimator}
+        out = {
+            "side": self.side,
+            "reason": self.reason,
+            "failure": None if self.failure is None else str(self.failure),
+            "tracker": self.tracker,
+            "estimator": self.estimator,
+        }
         out["markers"] = self.markers
         if self.pose is not None:
             yaw, pitch, roll = (math.degrees(a) for a in self.pose.attitude_rad())
@@ -93,7 +104,59 @@ class Detection:
         out["global"] = self.global_pose
         out["sigma"] = self.sigma
         out["notes"] = self.notes
+        out["blob_counts"] = self.blob_counts
         return out
+
+
+def _track_thesis(bgr, intrinsics: Intrinsics, origin, options: dict) -> TrackResult:
+    return thesis_track(bgr, intrinsics, options.get("thesis_settings"), origin)
+
+
+def _track_best(bgr, intrinsics: Intrinsics, origin, options: dict) -> TrackResult:
+    settings = options.get("tracker_settings") or TrackerSettings()
+    if settings.beacon != options["beacon"]:
+        settings = TrackerSettings(**{**settings.__dict__, "beacon": options["beacon"]})
+    return track(bgr, intrinsics, settings, origin)
+
+
+TRACKERS: dict[str, Callable[..., TrackResult]] = {"thesis": _track_thesis, "best": _track_best}
+"""Tracker name → function (BGR image, full-frame intrinsics, crop origin, options) → :class:`TrackResult`:
+``thesis`` is the study's (:mod:`pipeline.thesis_tracker`), ``best`` ours (:mod:`pipeline.tracker`)."""
+
+
+def _estimate_thesis(tr: TrackResult, intrinsics: Intrinsics, design: BeaconDesign, result: Detection, options) -> None:
+    if tr.azimuth_rad is not None:
+        s_az, s_el = tr.azimuth_rad, tr.elevation_rad
+    else:  # the study's formula on full-resolution, full-frame pixels
+        s_az, s_el = study_angles(tr.uv[:, 0], tr.uv[:, 1], (intrinsics.width_px, intrinsics.height_px), intrinsics)
+    est = thesis_pose_from_vectors(study_unit_vectors(s_az, s_el), design)
+    if not all(est.converged):
+        result.notes.append(f"Newton did not converge (triads converged: {list(est.converged)})")
+    result.pose = est.pose
+    if est.pose is None:
+        result.reason, result.failure = est.reason, est.failure
+
+
+def _estimate_best(tr: TrackResult, intrinsics: Intrinsics, design: BeaconDesign, result: Detection, options) -> None:
+    try:
+        est = pnp_pose(tr.uv, design, intrinsics, options["sigma_px"])
+    except ValueError as exc:
+        result.reason, result.failure = str(exc), Failure.POSE
+        return
+    result.pose = est.pose
+    result.sigma = {
+        "range_m": est.bound.range_m,
+        "attitude_deg": math.degrees(est.bound.attitude_rad),
+        "lateral_m": est.bound.lateral_m,
+        "reprojection_rms_px": est.reprojection_rms_px,
+    }
+
+
+ESTIMATORS: dict[str, Callable[..., None]] = {"thesis": _estimate_thesis, "best": _estimate_best}
+"""Estimator name → function filling a :class:`Detection`'s pose (or its reason) from a
+tracker's five numbered markers: ``thesis`` is the study's inverse perspective + QUEST
+(:mod:`pipeline.thesis_pose`), ``best`` SQPnP + Levenberg–Marquardt with its covariance
+(:func:`pipeline.pose.pnp_pose`)."""
 
 
 def _check_choice(name: str, value: str, allowed) -> None:
@@ -103,7 +166,8 @@ def _check_choice(name: str, value: str, allowed) -> None:
 
 def detect(
     image,
-    camera: str,
+    intrinsics: Intrinsics,
+    *,
     tracker: str = "best",
     estimator: str = "best",
     beacon: str = "v2",
@@ -123,14 +187,15 @@ def detect(
     image
         BGR image (uint8/uint16/float, grey accepted): the camera's full frame, or a crop
         of it whose top-left pixel is ``crop_origin_px``.
-    camera
-        Camera name (``camera_models``), for the frame size and intrinsics.
+    intrinsics
+        Nominal pinhole intrinsics of the camera's full frame (frame size, focal lengths
+        and principal point, px), e.g. ``Intrinsics.from_geometry(camera_geometry(name))``.
     tracker, estimator
-        ``thesis`` (the study's) or ``best``.
+        A name of :data:`TRACKERS` / :data:`ESTIMATORS`: ``thesis`` (the study's) or ``best``.
     beacon
         ``v1`` or ``v2``.
     calibration
-        Undistort with this calibration first (its size must be the camera's frame).
+        Undistort with this calibration first (its size must be the frame's).
     alpha
         ``getOptimalNewCameraMatrix`` alpha for the undistortion (0 or 1 in the study).
     crop_origin_px
@@ -148,46 +213,41 @@ def detect(
     """
     _check_choice("tracker", tracker, TRACKERS)
     _check_choice("estimator", estimator, ESTIMATORS)
-    geometry = camera_geometry(camera)
     design = beacon_design(beacon)
-    intr = Intrinsics.from_geometry(geometry)
+    intr = intrinsics
     result = Detection(None, None, tracker=tracker, estimator=estimator)
     if calibration is not None:
         new_camera_matrix(calibration, alpha)  # validates alpha
-        if (calibration.width_px, calibration.height_px) != (geometry.width_px, geometry.height_px):
+        if (calibration.width_px, calibration.height_px) != (intr.width_px, intr.height_px):
             raise ValueError(
                 f"calibration: made for {calibration.width_px}×{calibration.height_px} px, "
-                f"camera {camera} is {geometry.width_px}×{geometry.height_px} px"
+                f"the frame is {intr.width_px}×{intr.height_px} px"
             )
     bgr, reason = as_bgr(image)
     if bgr is None:
-        result.reason = reason
+        result.reason, result.failure = reason, Failure.IMAGE
         return result
     h, w = bgr.shape[:2]
-    origin, reason = _origin(w, h, geometry, crop_origin_px)
+    origin, reason = _origin(w, h, intr, crop_origin_px)
     if reason:
-        result.reason = reason
+        result.reason, result.failure = reason, Failure.IMAGE
         return result
     new_k = None
     if calibration is not None:
         bgr, intr = undistort(bgr, calibration, alpha, origin)
         new_k = intr.matrix()
+    options = {"beacon": beacon, "tracker_settings": tracker_settings, "thesis_settings": thesis_settings}
     if track_cache is not None and tracker in track_cache:
         tr = track_cache[tracker]
-    elif tracker == "thesis":
-        tr = thesis_track(bgr, intr, thesis_settings, origin)
     else:
-        settings = tracker_settings or TrackerSettings()
-        if settings.beacon != beacon:
-            settings = TrackerSettings(**{**settings.__dict__, "beacon": beacon})
-        tr = track(bgr, intr, settings, origin)
+        tr = TRACKERS[tracker](bgr, intr, origin, options)
     if track_cache is not None:
         track_cache[tracker] = tr
     result.side, result.notes = tr.side, list(tr.notes)
+    result.blob_counts = {c: sum(b.colour == c for b in tr.blobs) for c in SIDE_COLOURS}
+    result.reason, result.failure = tr.reason, tr.failure
     if not tr.found:
-        result.reason = tr.reason
         return result
-    result.reason = tr.reason
     az, el = _angles(tr, intr)
     shown = tr.uv if calibration is None else distort_points(tr.uv, calibration, new_k)
     result.markers = [
@@ -197,31 +257,9 @@ def detect(
     ]  # fmt: skip
     if tr.side is not None:
         result.led_points = LEDPoints(ring_camera or 0, tr.side, tuple(az), tuple(el))
-    if estimator == "thesis":
-        if tr.azimuth_rad is not None:
-            s_az, s_el = tr.azimuth_rad, tr.elevation_rad
-        else:  # the study's formula on full-resolution, full-frame pixels
-            s_az, s_el = study_angles(tr.uv[:, 0], tr.uv[:, 1], (intr.width_px, intr.height_px), intr)
-        est = thesis_pose_from_vectors(study_unit_vectors(s_az, s_el), design)
-        if not all(est.converged):
-            result.notes.append(f"Newton did not converge (triads converged: {list(est.converged)})")
-        if est.pose is None:
-            result.reason = est.reason
-            return result
-        result.pose = est.pose
-    else:
-        try:
-            est = pnp_pose(tr.uv, design, intr, sigma_px)
-        except ValueError as exc:
-            result.reason = str(exc)
-            return result
-        result.pose = est.pose
-        result.sigma = {
-            "range_m": est.bound.range_m,
-            "attitude_deg": math.degrees(est.bound.attitude_rad),
-            "lateral_m": est.bound.lateral_m,
-            "reprojection_rms_px": est.reprojection_rms_px,
-        }
+    ESTIMATORS[estimator](tr, intr, design, result, {"sigma_px": sigma_px})
+    if result.pose is None:
+        return result
     if tr.side is not None:
         g = global_pose(tr.side, result.pose, design.d_t_m, ring_camera)
         result.global_pose = {
@@ -232,13 +270,11 @@ def detect(
     return result
 
 
-def _origin(w: int, h: int, geometry, crop_origin_px) -> tuple[tuple[int, int], str | None]:
-    fw, fh = geometry.width_px, geometry.height_px
+def _origin(w: int, h: int, intrinsics: Intrinsics, crop_origin_px) -> tuple[tuple[int, int], str | None]:
+    fw, fh = intrinsics.width_px, intrinsics.height_px
     if crop_origin_px is None:
         if (w, h) != (fw, fh):
-            return (0, 0), (
-                f"image: {w}×{h} px is not {geometry.name}'s {fw}×{fh} px frame (give the crop origin for a crop)"
-            )
+            return (0, 0), f"image: {w}×{h} px is not the camera's {fw}×{fh} px frame (give the crop origin for a crop)"
         return (0, 0), None
     u0, v0 = (int(c) for c in crop_origin_px)
     if u0 < 0 or v0 < 0 or u0 + w > fw or v0 + h > fh:

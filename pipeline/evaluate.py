@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from pipeline.angles import Intrinsics
 from pipeline.detect import detect
 
 
@@ -32,15 +33,15 @@ def _truth_value(truth: dict, key: str):
     return truth.get("scenario", {}).get(key)
 
 
-def evaluate_detection(image_bgr, camera_name: str, truth: dict, **detect_kwargs) -> dict:
+def evaluate_detection(image_bgr, intrinsics: Intrinsics, truth: dict, **detect_kwargs) -> dict:
     """Detect in ``image_bgr`` and score the answer.
 
     Parameters
     ----------
     image_bgr
         BGR image: the full frame, or a crop with ``crop_origin_px`` in ``detect_kwargs``.
-    camera_name
-        Camera model name.
+    intrinsics
+        Nominal intrinsics of the camera's full frame (see :func:`pipeline.detect.detect`).
     truth
         ``markers_px`` (5 × (u, v), markers 1..5, full-frame pixels), ``range_m``,
         ``yaw_deg`` and optionally ``side``; a ``render.json`` dict also works.
@@ -54,13 +55,15 @@ def evaluate_detection(image_bgr, camera_name: str, truth: dict, **detect_kwargs
         true side), ``numbering_correct`` (every marker's nearest true marker has its
         id, within half the smallest true marker spacing), ``marker_errors_px`` (per
         marker, to the true marker of the same id), ``centroid_rms_px``,
-        ``range_m``, ``range_error_m``, ``yaw_deg``, ``yaw_error_deg``, ``reason``, ``notes`` (the detector's).
+        ``range_m``, ``range_error_m``, ``yaw_deg``, ``yaw_error_deg``, ``reason``, ``failure``
+        (:class:`pipeline.failures.Failure` code or None), ``side_blobs`` (blobs the tracker
+        found of the true side's colour; None without a true side), ``notes`` (the detector's).
     """
     uv_true = _truth_markers(truth)
     range_true = _truth_value(truth, "range_m")
     yaw_true = _truth_value(truth, "yaw_deg")
     side_true = _truth_value(truth, "side")
-    det = detect(image_bgr, camera_name, **detect_kwargs).to_dict()
+    det = detect(image_bgr, intrinsics, **detect_kwargs).to_dict()
     out = {
         "detected": bool(det["markers"]),
         "side": det["side"],
@@ -73,6 +76,8 @@ def evaluate_detection(image_bgr, camera_name: str, truth: dict, **detect_kwargs
         "yaw_deg": det["yaw_deg"],
         "yaw_error_deg": None,
         "reason": det["reason"],
+        "failure": det["failure"],
+        "side_blobs": None if side_true is None else det["blob_counts"].get(side_true, 0),
         "notes": list(det["notes"]),
     }
     if not det["markers"]:

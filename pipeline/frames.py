@@ -4,9 +4,9 @@ See ``pipeline/CONVENTIONS.md`` for the derivation. In short (all right-handed):
 
 * **T**, our target frame (``scenes.beacon``): origin at marker 1's lit face, x toward the
   viewer, y the viewer's left, z down.
-* **cv**, the camera frame of OpenCV and ``camera_models.geometry``: x right, y down, z
+* **cv**, the camera frame of OpenCV and ``scenes.view``: x right, y down, z
   forward.
-* **Cs**, the study's camera frame, as its unit-vector formula defines it (THESIS_FACTS
+* **Cs**, the study's camera frame, as its unit-vector formula defines it (docs/source-study.md
   §5.7): X backward (out of the camera), Y right, Z up.
 * **S**, the study's target frame made right-handed: x toward the viewer, y the viewer's
   right, z up; S = T turned 180° about x. With it a camera facing the target squarely
@@ -16,7 +16,7 @@ See ``pipeline/CONVENTIONS.md`` for the derivation. In short (all right-handed):
   forward, y right, z down. The camera attitude in the target frame is the Z-Y-X Euler
   angles of B in F, so a camera facing the target squarely has yaw = pitch = roll = 0
   and ``yaw_deg`` equals the scenario's yaw (camera azimuth toward the target's +y).
-* **R**, the robot frame of the study's camera ring (THESIS_FACTS §8): x forward, y left,
+* **R**, the robot frame of the study's camera ring (docs/source-study.md §8): x forward, y left,
   z up (ROS convention). This is the frame in which the study's T3 rotation about Z by
   θ_c is exactly the camera-to-robot rotation; the reported robot attitude uses the
   body frame x forward, y right, z down.
@@ -52,7 +52,7 @@ FRD_FROM_FLU = np.diag([1.0, -1.0, -1.0])
 """Robot body frame (x forward, y right, z down) from the robot ring frame (x forward, y left, z up)."""
 
 RING_RADIUS_M = 0.2
-"""Distance from the ring centre to each camera, m (THESIS_FACTS §4)."""
+"""Distance from the ring centre to each camera, m (docs/source-study.md §4)."""
 
 
 def homogeneous(rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -139,7 +139,7 @@ def beacon_from_target(side: str, d_t_m: float) -> NDArray[np.float64]:
 
 
 def ring_angle_rad(camera_index: int, n_cameras: int = 6) -> float:
-    """The study's θ_c = C·((N−2)·π/2)/N + π (THESIS_FACTS §8).
+    """The study's θ_c = C·((N−2)·π/2)/N + π (docs/source-study.md §8).
 
     Equals 2π·C/N + π only for N = 6 (it is half the polygon's interior angle), so other
     ring sizes get the wrong spacing: kept as the study wrote it.

@@ -1,4 +1,4 @@
-"""Inverse perspective: ranges to three markers from their lines of sight (THESIS_FACTS §6).
+"""Inverse perspective: ranges to three markers from their lines of sight (docs/source-study.md §6).
 
 For a triad (i, j, k) with known marker distances l_ij and measured cos θ_ij = r_i·r_j,
 the ranges solve the law of cosines three times::

@@ -3,7 +3,7 @@
 Numbering (the study's detector numbering = the project's marker ids): 1 centre (out of
 plane), 2 the viewer's right, 3 the viewer's left, 4 top, 5 bottom.
 
-* :func:`number_study` is the study's rule (THESIS_FACTS §5.6): highest in the image is 4,
+* :func:`number_study` is the study's rule (docs/source-study.md §5.6): highest in the image is 4,
   lowest is 5, the other three by increasing azimuth (positive left) are 2, 1, 3. The
   study calls 4 the "greatest elevation" while its elevation is positive *downward*;
   the project reads "highest" as top of the image (least elevation), as its marker
@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+
+from pipeline.failures import Failure
 
 
 @dataclass
@@ -78,6 +80,8 @@ class TrackResult:
         (5, 2) full-resolution pixels of markers 1..5, or None when no target.
     reason
         Why there is no target (or what is doubtful about it), else None.
+    failure
+        The code of ``reason`` when there is no complete answer, else None.
     blobs
         Every blob found (for diagnostics).
     notes
@@ -93,6 +97,7 @@ class TrackResult:
     notes: list[str] = field(default_factory=list)
     azimuth_rad: NDArray[np.float64] | None = None
     elevation_rad: NDArray[np.float64] | None = None
+    failure: Failure | None = None
 
     @property
     def found(self) -> bool:

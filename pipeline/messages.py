@@ -1,4 +1,4 @@
-"""Typed mirrors of the study's three ROS messages (THESIS_FACTS §9), with JSON round trip.
+"""Typed mirrors of the study's three ROS messages (docs/source-study.md §9), with JSON round trip.
 
 The study's programs passed these between the tracker, the pose estimator and the frame
 chain. Here every quantity is in SI units (m, rad) and the unit is in the field name; the
@@ -6,7 +6,7 @@ study's mm and degrees are converted at the edges.
 
 * :class:`LEDPoints` — tracker → pose: camera number, LED colour, azimuth and elevation
   of markers 1..5 (azimuth positive to the viewer's left, elevation positive downward,
-  THESIS_FACTS §5.7).
+  docs/source-study.md §5.7).
 * :class:`BotPositionQuat` — pose → frames: range R1 (camera to marker 1), the QUEST
   quaternion (x, y, z, w; scalar last, as the study wrote it) and the unit vector r1.
 * :class:`GlobalPos` — frames → user: X, Y, Z and yaw, pitch, roll in the beacon frame.

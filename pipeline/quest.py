@@ -11,7 +11,7 @@ here are (x, y, z, w), scalar last, in Shuster's convention:
 A(q) = (w² − |q_v|²) I + 2 q_v q_vᵀ − 2 w [q_v×], so that w_i ≈ A(q) v_i. (scipy's
 ``Rotation.from_quat(q).as_matrix()`` is A(q)ᵀ.)
 
-* :func:`quest_shortcut` is what the study ran (THESIS_FACTS §7): λ_max ≈ 1, Gibbs vector
+* :func:`quest_shortcut` is what the study ran (docs/source-study.md §7): λ_max ≈ 1, Gibbs vector
   g = ((1 + σ)I − S)⁻¹ z, q = (g, 1)/√(1 + |g|²). With weights summing to 1 and
   noise-free vectors λ_max is exactly 1, so the shortcut is then exact up to rounding;
   with noise λ_max < 1 and it is approximate; at a 180° rotation (1 + σ)I − S is singular

@@ -1,4 +1,4 @@
-"""The study's pose estimator, kept as it was (THESIS_FACTS §6–8), in one consistent frame set.
+"""The study's pose estimator, kept as it was (docs/source-study.md §6–8), in one consistent frame set.
 
 Steps, for unit vectors r_1..r_5 in the study camera frame Cs (X back, Y right, Z up):
 
@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.angles import study_unit_vectors
+from pipeline.failures import Failure
 from pipeline.frames import CS_FROM_CV, S_FROM_T, Pose
 from pipeline.inverse_perspective import geometric_start, solve_triads, study_start
 from pipeline.messages import BotPositionQuat, LEDPoints
@@ -44,7 +45,7 @@ from pipeline.quest import attitude_matrix, quest, quest_shortcut
 from scenes.beacon import BeaconDesign
 
 STUDY_WEIGHTS = (0.05, 0.05, 0.45, 0.45)
-"""QUEST weights for w2..w5 after the study's tuning (THESIS_FACTS §7)."""
+"""QUEST weights for w2..w5 after the study's tuning (docs/source-study.md §7)."""
 
 HORIZONTAL = (0, 1, 2)
 VERTICAL = (0, 3, 4)
@@ -100,7 +101,7 @@ def _cosines(r: NDArray[np.float64], triad) -> NDArray[np.float64]:
 def thesis_ranges(
     r_cs, design: BeaconDesign, start: str = "study", tol_mm: float = 1e-6, max_iter: int = 10000
 ) -> ThesisRanges:
-    """Inverse-perspective ranges of markers 1..5 (THESIS_FACTS §6), vectorised.
+    """Inverse-perspective ranges of markers 1..5 (docs/source-study.md §6), vectorised.
 
     Parameters
     ----------
@@ -165,6 +166,8 @@ class ThesisPoseResult:
         Newton's flags for the two triads.
     reason
         Why there is no pose, else None.
+    failure
+        The code of ``reason``, else None.
     """
 
     message: BotPositionQuat | None
@@ -172,6 +175,7 @@ class ThesisPoseResult:
     ranges_m: NDArray[np.float64]
     converged: tuple[bool, bool]
     reason: str | None
+    failure: Failure | None
 
 
 def thesis_pose_from_vectors(
@@ -187,12 +191,12 @@ def thesis_pose_from_vectors(
     ranges = rng.ranges_m[0]
     converged = (bool(rng.converged[0, 0]), bool(rng.converged[0, 1]))
     if not np.all(np.isfinite(ranges)) or ranges[0] <= 0:
-        return ThesisPoseResult(None, None, ranges, converged, "inverse perspective: no finite positive range")
+        return ThesisPoseResult(None, None, ranges, converged, "inverse perspective: no finite positive range", Failure.RANGE)
     q = _attitude(r, ranges, design, weights, full_quest)
     if q is None:
-        return ThesisPoseResult(None, None, ranges, converged, "QUEST: no finite attitude")
+        return ThesisPoseResult(None, None, ranges, converged, "QUEST: no finite attitude", Failure.ATTITUDE)
     msg = BotPositionQuat(float(ranges[0]), tuple(q), tuple(r[0]))
-    return ThesisPoseResult(msg, pose_from_study(q, ranges[0], r[0]), ranges, converged, None)
+    return ThesisPoseResult(msg, pose_from_study(q, ranges[0], r[0]), ranges, converged, None, None)
 
 
 def _attitude(r, ranges, design, weights, full_quest) -> NDArray[np.float64] | None:

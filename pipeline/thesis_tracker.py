@@ -1,4 +1,4 @@
-"""The study's marker tracker, kept as it was (THESIS_FACTS §5).
+"""The study's marker tracker, kept as it was (docs/source-study.md §5).
 
 1. Resize to 50 % for the Canon T6 (``cv2.resize`` at fx = fy = 0.5, bilinear).
 2. BGR → HSV (H 0–180, S and V 0–255); one ``inRange`` mask per colour.
@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.angles import Intrinsics, full_pixel, resized_pixel, study_angles
+from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, to_uint8
 from pipeline.markers import Blob, TrackResult, number_study
 from scenes.led import SIDE_COLOURS
@@ -49,7 +50,7 @@ STUDY_HSV_RANGES: dict[str, list[HsvBox]] = {
     "blue": [((84, 40, 152), (180, 255, 255))],
     "yellow": [((12, 190, 45), (26, 255, 255))],
 }
-"""The study's inRange thresholds per colour (THESIS_FACTS §5.2); a colour may have several boxes."""
+"""The study's inRange thresholds per colour (docs/source-study.md §5.2); a colour may have several boxes."""
 
 
 @dataclass(frozen=True)
@@ -130,7 +131,7 @@ def thesis_track(
     s = settings or ThesisTrackerSettings()
     bgr, reason = as_bgr(image)
     if bgr is None:
-        return TrackResult(None, None, reason)
+        return TrackResult(None, None, reason, failure=Failure.IMAGE)
     bgr = to_uint8(bgr)
     scale = s.resize if s.resize is not None else (0.5 if intrinsics.width_px >= 3000 else 1.0)
     h, w = bgr.shape[:2]
@@ -160,7 +161,9 @@ def thesis_track(
             full = np.array([[b.u, b.v] for b in blobs])
             return _numbered(colour, full, intrinsics, scale, all_blobs)
     summary = ", ".join(f"{c}: {n}" for c, n in counts.items())
-    return TrackResult(None, None, f"no colour with exactly 5 blobs ({summary})", all_blobs)
+    return TrackResult(
+        None, None, f"no colour with exactly 5 blobs ({summary})", all_blobs, failure=Failure.NO_COLOUR_WITH_FIVE
+    )
 
 
 def _detect(detector, mask: NDArray[np.uint8], max_area: float):
@@ -187,14 +190,14 @@ def _numbered(colour, full_uv, intrinsics: Intrinsics, scale: float, blobs) -> T
     try:
         order = number_study(az, el)
     except ValueError as exc:
-        return TrackResult(None, None, str(exc), blobs)
+        return TrackResult(None, None, str(exc), blobs, failure=Failure.NUMBERING)
     return TrackResult(colour, full_uv[order], None, blobs, [], az[order], el[order])
 
 
 def derive_hsv_ranges(
     images, colour: str, margin: tuple[int, int, int] = (3, 10, 10), percentiles: tuple[float, float] = (1.0, 99.0)
 ) -> list[HsvBox]:
-    """The study's threshold-setting procedure, made repeatable (THESIS_FACTS §10).
+    """The study's threshold-setting procedure, made repeatable (docs/source-study.md §10).
 
     From close-range (150 mm) captures of one side lit in ``colour``: take the lit
     pixels (V above Otsu's threshold of each image's V channel), and span the given

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.angles import Intrinsics
+from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, to_float
 from pipeline.markers import Blob, TrackResult, cross_candidates_many
 from scenes.beacon import BeaconDesign, beacon_design
@@ -302,9 +303,12 @@ def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None
         Full-frame pixel (u, v) of the image's top-left pixel.
     """
     s = settings or TrackerSettings()
-    blobs, reason = find_blobs(image, s, crop_origin_px)
+    bgr, reason = as_bgr(image)
+    if bgr is None:
+        return TrackResult(None, None, reason, failure=Failure.IMAGE)
+    blobs, reason = find_blobs(bgr, s, crop_origin_px)
     if not blobs:
-        return TrackResult(None, None, reason or "no bright blobs")
+        return TrackResult(None, None, reason or "no bright blobs", failure=Failure.NO_BLOBS)
     design = beacon_design(s.beacon)
     by_colour = {c: [b for b in blobs if b.colour == c] for c in SIDE_COLOURS}
     fits = {}
@@ -326,16 +330,18 @@ def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None
         counts = ", ".join(f"{c}: {colours.count(c)}" for c in [*SIDE_COLOURS, None] if colours.count(c))
         if colours.count(top) >= 3:
             return TrackResult(top, fit.uv, None, blobs, [f"mixed marker colours ({counts}); side by majority"])
-        return TrackResult(None, fit.uv, f"target found but its colour is unclear ({counts})", blobs)
-    return TrackResult(None, None, _why_not(by_colour, fits, blobs), blobs)
+        reason = f"target found but its colour is unclear ({counts})"
+        return TrackResult(None, fit.uv, reason, blobs, failure=Failure.COLOUR_UNCLEAR)
+    failure, reason = _why_not(by_colour, fits, blobs)
+    return TrackResult(None, None, reason, blobs, failure=failure)
 
 
-def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: list[Blob]) -> str:
+def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: list[Blob]) -> tuple[Failure, str]:
     colour = max(SIDE_COLOURS, key=lambda c: (len(by_colour[c]), -SIDE_COLOURS.index(c)))
     found = by_colour[colour]
     n = len(found)
     if n == 0:
-        return f"no blob has a side colour ({len(blobs)} blob(s) of unknown colour)"
+        return Failure.NO_SIDE_COLOUR, f"no blob has a side colour ({len(blobs)} blob(s) of unknown colour)"
     if n < 5:
         areas = np.array([b.area_px for b in found])
         big = [b for b in found if n > 1 and b.area_px > 1.8 * np.median(areas)]
@@ -343,9 +349,9 @@ def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: lis
         if big:
             b = big[0]
             what += f"; blob at ({b.u:.0f}, {b.v:.0f}) is {b.area_px / np.median(areas):.1f}× the median area: merged"
-        return what
+        return Failure.TOO_FEW_BLOBS, what
     rms = fits[colour].rms_px if colour in fits else float("inf")
-    return f"{colour}: {n} blobs but no 5 of them fit the target geometry (best reprojection RMS {rms:.2g} px)"
+    return Failure.NO_FIT, f"{colour}: {n} blobs but no 5 of them fit the target geometry (best reprojection RMS {rms:.2g} px)"
 
 
 def calibrate_colours(

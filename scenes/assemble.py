@@ -22,7 +22,10 @@ import numpy as np
 from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
 from scenes.diffusers import paper
 from scenes.led import led_for_side
+from scenes.near_field import NearFieldSettings, marker_emission
 from scenes.scenario import Scenario, ScenarioError
+from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
+from scenes.view import project
 
 FACE_STANDOFF_M = 2e-4
 """A housing's front plate sits 0.2 mm behind its lit face so the two never coincide; the
@@ -40,61 +43,12 @@ class CropBox:
     height: int
 
 
-def _frame(z_axis: np.ndarray) -> np.ndarray:
-    """A rotation matrix whose third column is ``z_axis``."""
-    z = z_axis / np.linalg.norm(z_axis)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return np.stack([x, y, z], axis=1)
-
-
-def _matrix(rot: np.ndarray, centre: np.ndarray, scale=(1.0, 1.0, 1.0)) -> list[list[float]]:
-    m = np.eye(4)
-    m[:3, :3] = rot @ np.diag(scale)
-    m[:3, 3] = centre
-    return np.round(m, 12).tolist()
-
-
-def disk_shape(centre, normal, radius, material, emitter=None) -> dict:
-    shape = {"type": "disk", "matrix": _matrix(_frame(normal), centre, (radius, radius, 1.0)), "material": material}
-    if emitter is not None:
-        shape["emitter"] = emitter
-    return shape
-
-
-def _cylinder(p0, p1, radius, material) -> dict:
-    return {
-        "type": "cylinder",
-        "p0": list(map(float, p0)),
-        "p1": list(map(float, p1)),
-        "radius": float(radius),
-        "material": material,
-    }
-
-
-def _box(centre, axes: np.ndarray, half_sizes, material) -> dict:
-    """An oriented box; ``axes`` columns are its local x, y, z directions."""
-    return {"type": "cube", "matrix": _matrix(axes, centre, half_sizes), "material": material}
-
-
-def _beam(p0, p1, width, material) -> dict:
-    """A square bar of side ``width`` from ``p0`` to ``p1``."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    axes = _frame(p1 - p0)
-    half = (width / 2, width / 2, np.linalg.norm(p1 - p0) / 2)
-    return _box((p0 + p1) / 2, axes, half, material)
-
-
 def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
     """The lit-face emitter of a side's markers and the face's reflectance.
 
     Bare LEDs: radiance 1/A along the normal × cos^(m−1)θ (one W·sr⁻¹ on axis). With
     diffusers: the near-field exit radiance L(r, θ) per W·sr⁻¹ as a texture.
     """
-    from scenes.near_field import NearFieldSettings, marker_emission
-
     design, led, config = scenario.design, led_for_side(side), scenario.diffuser
     group = f"led:{side}"
     if config.is_bare:
@@ -147,25 +101,25 @@ def target_shapes(
         back = p - depth * n
         shapes.append(disk_shape(world(p), wdir(n), r_face, face_material, emitter))
         shapes.append(disk_shape(world(p - FACE_STANDOFF_M * n), wdir(n), r_house, mat))
-        shapes.append(_cylinder(world(back), world(p), r_house, mat))
+        shapes.append(cylinder_shape(world(back), world(p), r_house, mat))
         shapes.append(disk_shape(world(back), wdir(-n), r_house, mat))
         if marker.id == 1:
-            shapes.append(_beam(world(centre), world(back), w, mat))
+            shapes.append(beam_shape(world(centre), world(back), w, mat))
             continue
         radial = (p - centre) * np.array([0.0, 1.0, 1.0])
         radial /= np.linalg.norm(radial)
         if np.allclose(n, radial):  # V1: housing along the arm, arm ends at its back
-            shapes.append(_beam(world(centre), world(back), w, mat))
+            shapes.append(beam_shape(world(centre), world(back), w, mat))
         else:  # V2: arm behind the plane, elbow forward into the housing's back
             elbow = back - (w / 2) * n
             root = centre - (depth + w / 2) * np.array([1.0, 0.0, 0.0])
-            shapes.append(_beam(world(root), world(elbow), w, mat))
-            shapes.append(_beam(world(elbow), world(back), w, mat))
+            shapes.append(beam_shape(world(root), world(elbow), w, mat))
+            shapes.append(beam_shape(world(elbow), world(back), w, mat))
     hub = centre - (depth + w / 2) * np.array([1.0, 0.0, 0.0])
-    shapes.append(_box(world(hub), rot, (w, w, w), mat))
+    shapes.append(box_shape(world(hub), rot, (w, w, w), mat))
     # stalk from the cross's hub back to the node's surface
     stalk_end = np.array([-(design.d_t_m - design.node_radius_m) + 1e-3, 0.0, 0.0])
-    shapes.append(_beam(world(hub), world(stalk_end), w, mat))
+    shapes.append(beam_shape(world(hub), world(stalk_end), w, mat))
     return shapes
 
 
@@ -177,7 +131,7 @@ def beacon_shapes(scenario: Scenario) -> tuple[list[dict], dict[str, float]]:
     top_z = floor_z - design.node_height_m
     r = design.node_radius_m
     shapes = [
-        _cylinder((0, 0, floor_z), (0, 0, top_z), r, mat),
+        cylinder_shape((0, 0, floor_z), (0, 0, top_z), r, mat),
         disk_shape(np.array([0.0, 0.0, top_z]), np.array([0.0, 0.0, -1.0]), r, mat),
     ]
     face_materials: dict[str, float] = {}
@@ -197,16 +151,6 @@ def room_extent(scenario: Scenario) -> tuple[np.ndarray, float, float]:
     along = along / dist if dist > 0 else np.array([1.0, 0.0, 0.0])
     env = scenario.env
     return along, -env.back_wall_m, dist + env.front_wall_m
-
-
-def rect_shape(centre, u, v, half_u, half_v, material, emitter=None) -> dict:
-    """A rectangle spanning ±half_u along ``u`` and ±half_v along ``v``; normal u × v."""
-    u, v = np.asarray(u, float), np.asarray(v, float)
-    rot = np.stack([u, v, np.cross(u, v)], axis=1)
-    shape = {"type": "rectangle", "matrix": _matrix(rot, centre, (half_u, half_v, 1.0)), "material": material}
-    if emitter is not None:
-        shape["emitter"] = emitter
-    return shape
 
 
 def environment_shapes(scenario: Scenario) -> list[dict]:
@@ -241,7 +185,6 @@ def ceiling_radiance_W_m2_sr(scenario: Scenario) -> float:
 
 def crop_box(scenario: Scenario) -> CropBox:
     """The full-frame pixels covering the beacon (all four targets) plus the margin."""
-    from camera_models.geometry import project
 
     design, geom = scenario.design, scenario.geometry
     if scenario.render.crop == "target":

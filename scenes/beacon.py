@@ -2,7 +2,7 @@
 
 Frames (all right-handed, metres)
 ---------------------------------
-* **Beacon (global) frame**, THESIS_FACTS §2: origin on the node's vertical axis at the
+* **Beacon (global) frame**, docs/source-study.md §2: origin on the node's vertical axis at the
   height of the targets' centre lines, Z down, blue target on +X, green at +90° about
   Z, red at 180°, yellow at 270°. The floor is the plane z = +target_height.
 * **Target frame** of one side: origin at the lit face of marker 1, x along the target
@@ -31,7 +31,7 @@ BEACON_NAMES = ("v1", "v2")
 HOUSING_FINISHES = ("white", "black")
 
 SIDE_ANGLE_RAD = {"blue": 0.0, "green": math.pi / 2, "red": math.pi, "yellow": 3 * math.pi / 2}
-"""Rotation of each side's target about the beacon's Z axis (THESIS_FACTS §2, §8)."""
+"""Rotation of each side's target about the beacon's Z axis (docs/source-study.md §2, §8)."""
 
 
 @dataclass(frozen=True)

@@ -17,11 +17,11 @@ import math
 
 import numpy as np
 
-from camera_models.geometry import project
 from scenes import spectra
 from scenes.near_field import NearFieldSettings, exit_spectral_factor, marker_emission
 from scenes.radiance import SpectralRadiance
 from scenes.scenario import Scenario
+from scenes.view import project
 
 
 def marker_figures(scenario: Scenario, radiance: SpectralRadiance | None = None) -> list[dict]:

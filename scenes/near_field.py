@@ -38,6 +38,7 @@ from scenes.diffusers import DiffuserConfig, default_foam, paper, stack
 from scenes.led import LED
 from scenes.mitsuba_variant import select_variant
 from scenes.render_cache import RenderCache, content_key
+from scenes.shapes import disk_shape
 
 log = logging.getLogger("beacon_sim")
 
@@ -145,8 +146,6 @@ def exit_spectral_factor(config: DiffuserConfig, side: str, led: LED) -> tuple[N
 
 def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: DiffuserConfig, side: str) -> dict:
     """Plain-data description of the near-field scene (face at z = 0, normal +z, metres)."""
-    from scenes.assemble import disk_shape
-
     r_face = design.lit_face_diameter_m / 2
     depth = design.housing_depth_m
     r_led = led.lens_diameter_mm * 1e-3 / 2

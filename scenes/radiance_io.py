@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 import colour
+import cv2
 import numpy as np
 import OpenEXR
 
@@ -119,7 +120,6 @@ def srgb_preview(radiance: SpectralRadiance, percentile: float = 99.5) -> np.nda
 
 def write_preview_png(path: str | Path, radiance: SpectralRadiance) -> Path:
     """Write :func:`srgb_preview` as a PNG."""
-    import cv2
 
     path = Path(path)
     rgb = srgb_preview(radiance)

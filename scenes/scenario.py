@@ -19,11 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from camera_models.geometry import CameraGeometry, CameraPose, camera_geometry
 from scenes.beacon import HOUSING_FINISHES, BeaconDesign, beacon_design, target_to_beacon
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
+from scenes.view import CameraGeometry, CameraPose, camera_geometry
 
 
 class ScenarioError(ValueError):

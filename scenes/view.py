@@ -1,0 +1,154 @@
+"""The viewing camera as the scene needs it: the pixel grid of a camera + lens, its pose
+and pinhole projection.
+
+The camera files live with the camera models (``camera_models/data/<name>.toml``); the
+scene reads only their ``[geometry]`` table here, so a scenario can name its camera
+without the scene importing the camera models (the later stage).
+
+Pixel coordinates follow OpenCV: (u, v) from the top-left, the centre of the top-left
+pixel at (0, 0), u to the right, v down. The principal point is the image centre,
+((W − 1)/2, (H − 1)/2). Camera frame: x right, y down, z along the optical axis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from scenes.sourced import load_sourced
+
+CAMERA_DATA_DIR = Path(__file__).resolve().parent.parent / "camera_models" / "data"
+"""The camera files: one TOML per camera + lens (the camera models read the rest of each)."""
+
+
+@dataclass(frozen=True)
+class CameraGeometry:
+    """Pixel grid and focal length of a camera + lens.
+
+    Attributes
+    ----------
+    name, description
+        Identifier (``canon-t6-18mm``) and a human description.
+    width_px, height_px
+        Full-frame size of the saved image, pixels.
+    pixel_pitch_um
+        Pixel pitch on the sensor, µm.
+    focal_length_mm
+        Effective focal length, mm.
+    """
+
+    name: str
+    description: str
+    width_px: int
+    height_px: int
+    pixel_pitch_um: float
+    focal_length_mm: float
+
+    @property
+    def focal_length_px(self) -> float:
+        """Focal length in pixels, f / p."""
+        return self.focal_length_mm * 1e3 / self.pixel_pitch_um
+
+    @property
+    def principal_point_px(self) -> tuple[float, float]:
+        """Principal point (cx, cy), pixels (image centre, OpenCV convention)."""
+        return (self.width_px - 1) / 2.0, (self.height_px - 1) / 2.0
+
+    @property
+    def horizontal_fov_deg(self) -> float:
+        """Full horizontal field of view of the pinhole model, degrees."""
+        return math.degrees(2 * math.atan(self.width_px / (2 * self.focal_length_px)))
+
+    @property
+    def diagonal_fov_deg(self) -> float:
+        """Full diagonal field of view of the pinhole model, degrees."""
+        diag = math.hypot(self.width_px, self.height_px)
+        return math.degrees(2 * math.atan(diag / (2 * self.focal_length_px)))
+
+    def intrinsics(self) -> NDArray[np.float64]:
+        """3×3 camera matrix K (pixels)."""
+        cx, cy = self.principal_point_px
+        f = self.focal_length_px
+        return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+
+    def pixel_solid_angle_sr(self, u: NDArray[np.float64], v: NDArray[np.float64]):
+        """Solid angle seen by the pixel at (u, v) through the pinhole, sr.
+
+        Ω = (p/f)² cos³φ with φ the angle off the optical axis.
+        """
+        cx, cy = self.principal_point_px
+        f = self.focal_length_px
+        r2 = ((np.asarray(u) - cx) ** 2 + (np.asarray(v) - cy) ** 2) / f**2
+        return (1.0 / f**2) * (1.0 + r2) ** -1.5
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """Where a camera is and where it looks, in the beacon (world) frame.
+
+    Attributes
+    ----------
+    position_m
+        Centre of projection, m.
+    rotation
+        3×3 matrix whose rows are the camera's x (right), y (down) and z (forward) axes
+        expressed in the world frame: p_cam = rotation @ (p_world − position_m).
+    """
+
+    position_m: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+
+    @classmethod
+    def look_at(cls, position_m, target_m, up=(0.0, 0.0, -1.0)) -> CameraPose:
+        """A camera at ``position_m`` looking at ``target_m`` with image-up along ``up``."""
+        position = np.asarray(position_m, dtype=np.float64)
+        forward = np.asarray(target_m, dtype=np.float64) - position
+        forward /= np.linalg.norm(forward)
+        down = -np.asarray(up, dtype=np.float64)
+        right = np.cross(down, forward)
+        if np.linalg.norm(right) < 1e-9:
+            raise ValueError("camera pose: viewing direction parallel to 'up'")
+        right /= np.linalg.norm(right)
+        down = np.cross(forward, right)
+        return cls(position, np.stack([right, down, forward]))
+
+    def world_to_camera(self, points_m: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Points (…, 3) from the world frame to the camera frame, m."""
+        return (np.asarray(points_m) - self.position_m) @ self.rotation.T
+
+
+def project(geometry: CameraGeometry, pose: CameraPose, points_m) -> NDArray[np.float64]:
+    """Pinhole projection of world points (…, 3) to pixel coordinates (…, 2)."""
+    pc = pose.world_to_camera(points_m)
+    if np.any(pc[..., 2] <= 0):
+        raise ValueError("project: a point lies behind the camera")
+    cx, cy = geometry.principal_point_px
+    f = geometry.focal_length_px
+    return np.stack([cx + f * pc[..., 0] / pc[..., 2], cy + f * pc[..., 1] / pc[..., 2]], axis=-1)
+
+
+def camera_names() -> list[str]:
+    """Names of all cameras with a data file."""
+    return sorted(p.stem for p in CAMERA_DATA_DIR.glob("*.toml"))
+
+
+@lru_cache(maxsize=16)
+def camera_geometry(name: str) -> CameraGeometry:
+    """Geometry of the camera called ``name`` (e.g. ``canon-t6-18mm``)."""
+    path = CAMERA_DATA_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise ValueError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    values, _ = load_sourced(path)
+    g = values["geometry"]
+    width, height, pitch = int(g["width_px"]), int(g["height_px"]), float(g["pixel_pitch_um"])
+    if "focal_length_mm" in g:
+        focal = float(g["focal_length_mm"])
+    else:  # from the diagonal field of view of a rectilinear lens
+        half_diag_mm = 0.5 * math.hypot(width, height) * pitch * 1e-3
+        focal = half_diag_mm / math.tan(math.radians(g["diagonal_fov_deg"]) / 2)
+    return CameraGeometry(values["name"], values["description"], width, height, pitch, focal)

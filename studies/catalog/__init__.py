@@ -1,0 +1,18 @@
+"""The studies: each module a sweep over the engine's one frame path with its own report.
+
+A study module has ``NAME``, ``default_options(quick) -> StudyOptions`` and
+``run(out, options, execution) -> summary``. :data:`STUDIES` registers them by name;
+:mod:`studies.catalog.validate` (the source study's own tests) is run by its own command.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+from studies.catalog import brightness_diffuser, range_limit, replication, webcam_vs_dslr
+
+STUDIES: dict[str, ModuleType] = {m.NAME: m for m in (webcam_vs_dslr, brightness_diffuser, range_limit, replication)}
+"""Study name → module."""
+
+MAIN_JOB = ("webcam-vs-dslr", "brightness-diffuser", "range-limit")
+"""The studies the main job runs (quick forms)."""

@@ -1,0 +1,1 @@
+"""The ``beacon-sim`` command line (:mod:`studies.cli.app` assembles it)."""

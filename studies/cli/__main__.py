@@ -1,0 +1,5 @@
+"""``python -m studies.cli``: the same command line as ``beacon-sim``."""
+
+from studies.cli.app import main
+
+main()

@@ -1,0 +1,146 @@
+"""Camera commands: ``capture`` (what a camera saves) and ``emva1288`` (a photon-transfer data set)."""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Annotated
+
+import cv2
+import numpy as np
+import typer
+
+from camera_models.camera import load_camera
+from camera_models.capture import capture as run_capture
+from camera_models.capture import marker_core_saturation
+from camera_models.emva import EmvaSetup, green_qe, write_dataset
+from camera_models.exposure import manual_exposure
+from camera_models.optics import check_f_number
+from scenes.background import render_background
+from scenes.render import render as render_scenario
+from scenes.render_cache import RenderCache, atomic_write_bytes
+from studies.cli import options as opt
+from studies.cli.common import UsageError, console, prepare_out_dir
+
+
+def _gain(cam, iso: float | None, gain: int | None) -> float:
+    s = cam.sensor
+    if s.uses_iso:
+        if gain is not None:
+            raise UsageError(f"gain: {cam.name} sets its gain as an ISO; use --iso")
+        return s.analog_gain(iso=cam.exposure.iso if iso is None else iso)
+    if iso is not None:
+        raise UsageError(f"iso: {cam.name} has no ISO setting; use --gain (UVC gain code)")
+    return s.analog_gain(gain_code=s.gain_code_min if gain is None else gain)
+
+
+def emva1288(
+    out: opt.Out,
+    camera: opt.Camera = "canon-t6-18mm",
+    iso: opt.Iso = None,
+    gain: opt.Gain = None,
+    wavelength_nm: Annotated[float, typer.Option("--wavelength-nm", help="Light wavelength, nm.")] = 530.0,
+    seed: opt.Seed = 0,
+) -> None:
+    """Write an EMVA 1288 photon-transfer data set (descriptor file + PNG frames) from the sensor model.
+
+    Prints the model's true parameters as JSON (qe, K_DN_per_e, dark_noise_e,
+    saturation_e, wavelength_nm, pixel_area_um2) for comparison with an EMVA 1288 analysis.
+    """
+    cam = load_camera(camera)
+    analog_gain = _gain(cam, iso, gain)
+    green_qe(cam, wavelength_nm)  # validates the wavelength
+    if seed < 0:
+        raise UsageError(f"seed: expected an integer >= 0, got {seed}")
+    prepare_out_dir(out)
+    truth = write_dataset(cam, analog_gain, out, seed=seed, setup=EmvaSetup(wavelength_nm=wavelength_nm))
+    truth.update(iso=iso if cam.sensor.uses_iso else None, gain_code=gain)
+    print(json.dumps(truth, indent=2))
+    console.print(f"wrote {out}/descriptor.txt and images/ (process with the emva1288 package)")
+
+
+def capture(
+    out: opt.Out,
+    beacon: opt.Beacon = "v2",
+    side: opt.Side = "red",
+    range_m: opt.RangeM = 5.0,
+    yaw_deg: opt.YawDeg = 10.0,
+    camera: opt.Camera = "canon-t6-18mm",
+    environment: opt.Environment = "dark",
+    led_current_ma: opt.CurrentMA = None,
+    camera_height_m: opt.HeightM = 0.0,
+    housing: opt.Housing = "black",
+    foam: opt.Foam = False,
+    paper_sheets: opt.Sheets = 0,
+    paper_colour: opt.PaperColour = "white",
+    spp: opt.Spp = 16,
+    oversampling: opt.Oversampling = 3,
+    seed: opt.Seed = 0,
+    iso: opt.Iso = None,
+    gain: opt.Gain = None,
+    exposure_s: Annotated[
+        float | None, typer.Option("--exposure-s", help="Exposure time, s (manual; default the camera's).")
+    ] = None,
+    f_number: Annotated[float | None, typer.Option("--f-number", help="Working f-number (default the lens's).")] = None,
+    no_cache: opt.NoCache = False,
+) -> None:
+    """Simulate what the camera saves: JPEG, raw mosaic (16-bit PNG), full-frame preview and capture.json."""
+    cam = load_camera(camera)
+    if f_number is not None:
+        check_f_number(f_number)
+    exposure = None
+    if iso is not None or gain is not None or exposure_s is not None:
+        if cam.exposure.mode == "auto":
+            raise UsageError(f"exposure_s: {camera} exposes automatically; its exposure cannot be set")
+        exposure = manual_exposure(cam, exposure_s, iso, gain)
+    scenario = opt.scenario_from(
+        beacon=beacon, side=side, range_m=range_m, yaw_deg=yaw_deg, camera=camera, environment=environment,
+        led_current_ma=led_current_ma, camera_height_m=camera_height_m, housing=housing, foam=foam,
+        paper_sheets=paper_sheets, paper_colour=paper_colour, spp=spp, oversampling=oversampling, seed=seed,
+    )  # fmt: skip
+    prepare_out_dir(out)
+    cache = None if no_cache else RenderCache()
+    t0 = time.perf_counter()
+    with console.status(f"rendering {scenario.beacon} {scenario.side} at {scenario.range_m} m ..."):
+        radiance = render_scenario(scenario, cache)
+        background = render_background(scenario, cache)
+    with console.status(f"capturing with {camera} ..."):
+        cap = run_capture(radiance, cam, seed, background=background, exposure=exposure, f_number=f_number)
+    atomic_write_bytes(out / "image.jpg", cap.image.jpeg)
+    _ok, raw_png = cv2.imencode(".png", cap.raw)
+    atomic_write_bytes(out / "raw.png", raw_png.tobytes())
+    h, w = cap.image.rgb8.shape[:2]
+    step = max(1, int(np.ceil(max(w, h) / 1600)))
+    _ok, preview = cv2.imencode(".png", np.ascontiguousarray(cap.image.rgb8[::step, ::step, ::-1]))
+    atomic_write_bytes(out / "preview.png", preview.tobytes())
+    markers = marker_core_saturation(cap, cam, scenario)
+    meta = {
+        "scenario": scenario.to_dict(),
+        "camera": camera,
+        "seed": seed,
+        "f_number": f_number if f_number is not None else cam.lens.f_number,
+        "exposure": cap.exposure.to_dict(),
+        "K_DN_per_e": cam.sensor.K_DN_per_e(cap.exposure.analog_gain),
+        "saturated_fraction_frame": cap.saturated_fraction,
+        "markers_ground_truth_px": markers,
+        "raw": {
+            "cfa": cam.sensor.cfa,
+            "black_level_DN": cam.sensor.black_level_DN,
+            "white_level_DN": cam.sensor.white_level_DN,
+            "x0": cap.x0,
+            "y0": cap.y0,
+        },
+        "white_balance_gains": [float(g) for g in cap.image.wb_gains],
+        "jpeg": {"quality": cam.isp.jpeg_quality, "chroma_subsampling": cam.isp.chroma_subsampling},
+        "pixel_grid": radiance.grid.to_dict(),
+        "seconds": round(time.perf_counter() - t0, 3),
+        "files": {"image": "image.jpg", "raw": "raw.png", "preview": "preview.png"},
+    }
+    atomic_write_bytes(out / "capture.json", json.dumps(meta, indent=2).encode())
+    console.print(
+        f"wrote {out}/ (image.jpg, raw.png, preview.png, capture.json): exposure {cap.exposure.exposure_s:.4g} s, "
+        f"gain x{cap.exposure.analog_gain:.3g}, {100 * cap.saturated_fraction:.3f} % of pixels clipped"
+    )
+
+
+COMMANDS = {"capture": capture, "emva1288": emva1288}

@@ -1,0 +1,75 @@
+"""Options used by several commands, defined once (typer ``Annotated`` aliases), and the
+scenario they describe."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from scenes.scenario import RenderSettings, Scenario
+
+Out = Annotated[Path, typer.Option("--out", help="Output directory.")]
+Json = Annotated[bool, typer.Option("--json", help="Print JSON (for scripts) instead of a table.")]
+Beacon = Annotated[str, typer.Option("--beacon", help="Beacon design: v1 or v2.")]
+Side = Annotated[str, typer.Option("--side", help="Side facing the camera: red, green, blue, yellow.")]
+RangeM = Annotated[float, typer.Option("--range-m", help="Camera to marker 1, m.")]
+YawDeg = Annotated[float, typer.Option("--yaw-deg", help="Camera azimuth about the target's vertical axis, degrees.")]
+Camera = Annotated[str, typer.Option("--camera", help="Camera model (see 'beacon-sim cameras').")]
+Environment = Annotated[str, typer.Option("--environment", help="dark, dark-room or lit-room.")]
+CurrentMA = Annotated[
+    float | None, typer.Option("--led-current-ma", help="LED drive current, mA (default: datasheet test current).")
+]
+HeightM = Annotated[float, typer.Option("--camera-height-m", help="Camera height above marker 1, m.")]
+Housing = Annotated[str, typer.Option("--housing", help="Housing finish: black or white.")]
+Foam = Annotated[bool, typer.Option("--foam/--no-foam", help="Foam disc behind the paper of every marker.")]
+Sheets = Annotated[int, typer.Option("--paper-sheets", help="Sheets of paper in front of every LED, 0-5.")]
+PaperColour = Annotated[
+    str, typer.Option("--paper-colour", help="white, matched (each side's own colour), red, green, blue, yellow.")
+]
+Spp = Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")]
+Oversampling = Annotated[int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")]
+Seed = Annotated[int, typer.Option("--seed", help="Random seed (same seed, same bytes).")]
+NoCache = Annotated[bool, typer.Option("--no-cache", help="Render even if a cached render exists.")]
+Iso = Annotated[float | None, typer.Option("--iso", help="ISO (DSLR).")]
+Gain = Annotated[int | None, typer.Option("--gain", help="UVC gain code (webcam).")]
+Workers = Annotated[int | None, typer.Option("--workers", help="Local worker processes (default: CPUs).")]
+Scheduler = Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")]
+Seeds = Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.")]
+
+
+def scenario_from(
+    *,
+    beacon: str,
+    side: str,
+    range_m: float,
+    yaw_deg: float,
+    camera: str,
+    environment: str,
+    led_current_ma: float | None,
+    camera_height_m: float,
+    housing: str,
+    foam: bool,
+    paper_sheets: int,
+    paper_colour: str,
+    spp: int,
+    oversampling: int,
+    seed: int,
+) -> Scenario:
+    """The :class:`Scenario` the scenario options describe (validated)."""
+    return Scenario(
+        beacon=beacon,
+        side=side,
+        range_m=range_m,
+        yaw_deg=yaw_deg,
+        camera=camera,
+        environment=environment,
+        led_current_mA=led_current_ma,
+        camera_height_m=camera_height_m,
+        housing=housing,
+        foam=foam,
+        paper_sheets=paper_sheets,
+        paper_colour=paper_colour,
+        render=RenderSettings(spp=spp, oversampling=oversampling, seed=seed),
+    )

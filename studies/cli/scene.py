@@ -1,0 +1,97 @@
+"""The ``render`` command: spectral radiance of a scenario on a camera's pixel grid."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from scenes.marker_photometry import marker_figures
+from scenes.radiance_io import write_band_cube_exr, write_preview_png, write_radiance_exr
+from scenes.render import render as render_scenario
+from scenes.render import side_current_mA
+from scenes.render_cache import RenderCache, atomic_write_bytes
+from scenes.view import project
+from studies.cli import options as opt
+from studies.cli.common import console, prepare_out_dir
+
+
+def render(
+    out: opt.Out,
+    beacon: opt.Beacon = "v2",
+    side: opt.Side = "red",
+    range_m: opt.RangeM = 5.0,
+    yaw_deg: opt.YawDeg = 10.0,
+    camera: opt.Camera = "canon-t6-18mm",
+    environment: opt.Environment = "dark",
+    led_current_ma: opt.CurrentMA = None,
+    camera_height_m: opt.HeightM = 0.0,
+    housing: opt.Housing = "black",
+    foam: opt.Foam = False,
+    paper_sheets: opt.Sheets = 0,
+    paper_colour: opt.PaperColour = "white",
+    spp: opt.Spp = 16,
+    oversampling: opt.Oversampling = 3,
+    seed: opt.Seed = 0,
+    cube: Annotated[bool, typer.Option("--cube", help="Also write the 10 nm band cube (radiance_cube.exr).")] = False,
+    no_cache: opt.NoCache = False,
+) -> None:
+    """Render spectral radiance of a beacon on a camera's pixel grid (crop around the beacon)."""
+    scenario = opt.scenario_from(
+        beacon=beacon, side=side, range_m=range_m, yaw_deg=yaw_deg, camera=camera, environment=environment,
+        led_current_ma=led_current_ma, camera_height_m=camera_height_m, housing=housing, foam=foam,
+        paper_sheets=paper_sheets, paper_colour=paper_colour, spp=spp, oversampling=oversampling, seed=seed,
+    )  # fmt: skip
+    prepare_out_dir(out)
+    write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
+
+
+def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
+    """Render ``scenario`` and write radiance.exr, preview.png and render.json to ``out``."""
+    t0 = time.perf_counter()
+    with console.status(f"rendering {scenario.beacon} {scenario.side} at {scenario.range_m} m ..."):
+        radiance = render_scenario(scenario, cache)
+    elapsed = time.perf_counter() - t0
+    files = {
+        "radiance": write_radiance_exr(out / "radiance.exr", radiance).name,
+        "preview": write_preview_png(out / "preview.png", radiance).name,
+    }
+    if cube:
+        files["band_cube"] = write_band_cube_exr(out / "radiance_cube.exr", radiance).name
+    uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
+    meta = {
+        "marker_configuration": {
+            "foam": scenario.foam,
+            "paper_sheets": scenario.paper_sheets,
+            "paper_colour": scenario.diffuser.paper_colour_for(scenario.side),
+            "housing": scenario.housing,
+            "led_current_mA": scenario.current_mA,
+        },
+        "markers": marker_figures(scenario, radiance),
+        "scenario": scenario.to_dict(),
+        "variant": radiance.variant,
+        "from_cache": radiance.from_cache,
+        "render_seconds": round(elapsed, 3),
+        "pixel_grid": radiance.grid.to_dict(),
+        "components": [
+            {"name": c.name, "peak_radiance_W_m2_sr": float(c.image_W_m2_sr.max()), "led_current_mA": None}
+            for c in radiance.components
+        ],
+        "markers_ground_truth_px": [{"id": i + 1, "u": float(p[0]), "v": float(p[1])} for i, p in enumerate(uv)],
+        "files": files,
+    }
+    for c in meta["components"]:
+        if c["name"].startswith("led:"):
+            c["led_current_mA"] = side_current_mA(scenario, c["name"][4:])
+    atomic_write_bytes(out / "render.json", json.dumps(meta, indent=2).encode())
+    console.print(
+        f"wrote {out}/ ({', '.join(files.values())}, render.json) "
+        f"in {elapsed:.1f} s{' [cache]' if radiance.from_cache else ''}"
+    )
+    return meta
+
+
+COMMANDS = {"render": render}

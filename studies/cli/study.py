@@ -1,0 +1,92 @@
+"""Study commands: ``study`` (one sweep of the catalog), ``validate`` (the source study's
+tests) and ``main-job`` (the quick studies with an index page)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from studies.catalog import MAIN_JOB, STUDIES
+from studies.catalog import validate as validation
+from studies.cli import options as opt
+from studies.cli.common import UsageError, console, parse_list, prepare_out_dir, rich_progress
+from studies.engine.report import Report
+from studies.engine.sweep import Execution
+
+
+def _execution(workers: int | None, scheduler: str | None) -> Execution:
+    if workers is not None and workers < 1:
+        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    return Execution(workers=workers, scheduler=scheduler, progress=rich_progress)
+
+
+def study(
+    name: Annotated[str, typer.Argument(help=f"One of: {', '.join(STUDIES)}.")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    quick: Annotated[bool, typer.Option("--quick", help="The small grid the main job runs.")] = False,
+    cameras: Annotated[str | None, typer.Option("--cameras", help="Comma-separated camera names.")] = None,
+    ranges: Annotated[str | None, typer.Option("--ranges", help="Comma-separated ranges, m.")] = None,
+    currents: Annotated[str | None, typer.Option("--currents", help="Comma-separated LED currents, mA.")] = None,
+    seeds: opt.Seeds = None,
+    workers: opt.Workers = None,
+    scheduler: opt.Scheduler = None,
+) -> None:
+    """Run a study sweep and write report.html, results.csv/.parquet and summary.json."""
+    if name not in STUDIES:
+        raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
+    module = STUDIES[name]
+    options = module.default_options(quick).with_overrides(
+        cameras=parse_list("cameras", cameras),
+        ranges_m=parse_list("ranges", ranges, float),
+        currents_mA=parse_list("currents", currents, float),
+        seeds=seeds,
+    )
+    options.validate()
+    execution = _execution(workers, scheduler)
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    module.run(out, options, execution)
+    console.print(f"{name}: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
+
+
+def validate(
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    quick: Annotated[bool, typer.Option("--quick", help="Fewer conditions and seeds.")] = False,
+    seeds: opt.Seeds = None,
+    workers: opt.Workers = None,
+    scheduler: opt.Scheduler = None,
+) -> None:
+    """Predict the source study's tests with its own detector and settings (validation.csv, report.html)."""
+    if seeds is not None and seeds < 1:
+        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    execution = _execution(workers, scheduler)
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    validation.run(out, quick, execution, seeds=seeds)
+    console.print(f"validate: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
+
+
+def main_job(
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job"),
+    workers: opt.Workers = None,
+) -> None:
+    """Run the quick versions of the three studies on the built-in defaults."""
+    execution = _execution(workers, None)
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    index = Report("beacon-sim main job: quick studies")
+    for name in MAIN_JOB:
+        module = STUDIES[name]
+        options = module.default_options(True)
+        options.validate()
+        module.run(prepare_out_dir(out / name), options, execution)
+        index.parts.append(f"<p><a href='{name}/report.html'>{name}</a></p>")
+    index.text(f"Finished in {time.perf_counter() - t0:.0f} s.", note=True)
+    index.write(out / "index.html")
+    console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
+
+
+COMMANDS = {"study": study, "validate": validate, "main-job": main_job}

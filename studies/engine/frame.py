@@ -1,0 +1,247 @@
+"""One simulated frame, end to end: render → camera → saved JPEG → detectors → result rows.
+
+A *frame task* is a plain dict (JSON-able, so it can be hashed, stored and sent to a
+worker process or a Dask cluster):
+
+``scenario``   keyword arguments of :class:`scenes.scenario.Scenario` (without ``render``)
+``render``     keyword arguments of :class:`scenes.scenario.RenderSettings`
+``seed``       sensor-noise seed
+``exposure``   optional manual settings ``{"iso": .., "exposure_s": ..}`` (else the camera's)
+``trackers``, ``estimators``  which detectors to run (default both of each)
+``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
+``tags``       optional fields copied into every row (e.g. the test's name)
+``full_frame`` capture and detect on the whole frame instead of the rendered crop
+
+:func:`simulate_frame` returns one row per tracker × estimator with the task's
+parameters, the camera's exposure, ground truth, detection and pose results, and the
+marker measurements that do not depend on the detector (core saturation, colour).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import resource
+
+import colour
+import cv2
+import numpy as np
+
+from camera_models.camera import load_camera
+from camera_models.capture import capture, marker_core_saturation, marker_pixels
+from camera_models.exposure import manual_exposure
+from pipeline.angles import Intrinsics
+from pipeline.detect import ESTIMATORS, TRACKERS
+from pipeline.evaluate import evaluate_detection
+from pipeline.thesis_tracker import ThesisTrackerSettings
+from scenes.background import render_background
+from scenes.render import render, with_led_current
+from scenes.render_cache import RenderCache
+from scenes.scenario import RenderSettings, Scenario
+
+FRAME_VERSION = 3
+"""Bump when a change alters the rows a task produces (invalidates stored results).
+3: rows carry the detector's failure code and the true side's blob count."""
+
+
+def frame_scenario(task: dict):
+    """The :class:`Scenario` of a task (validates it)."""
+    return Scenario(**task["scenario"], render=RenderSettings(**task.get("render", {})))
+
+
+def simulate_frame(task: dict) -> list[dict]:
+    """Simulate one frame task (see module docstring) and score every detector on it."""
+    scenario, camera, radiance, background = frame_inputs(task)
+    exposure = None
+    if task.get("exposure"):
+        exposure = manual_exposure(camera, task["exposure"].get("exposure_s"), task["exposure"].get("iso"))
+    cap = capture(radiance, camera, int(task["seed"]), background, exposure, full=bool(task.get("full_frame")))
+    image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    truth_uv = marker_pixels(camera, scenario)
+    truth = {
+        "markers_px": truth_uv.tolist(),
+        "range_m": scenario.range_m,
+        "yaw_deg": scenario.yaw_deg,
+        "side": scenario.side,
+    }
+    saturation = marker_core_saturation(cap, camera, scenario)
+    colours = marker_colours(image_bgr, truth_uv, saturation, (cap.x0, cap.y0))
+    base = {
+        **{k: v for k, v in task["scenario"].items()},
+        **task.get("tags", {}),
+        "seed": int(task["seed"]),
+        "nominal_range_m": task.get("nominal", {}).get("range_m", scenario.range_m),
+        "nominal_yaw_deg": task.get("nominal", {}).get("yaw_deg", scenario.yaw_deg),
+        "exposure_s": cap.exposure.exposure_s,
+        "analog_gain": cap.exposure.analog_gain,
+        "iso": cap.exposure.iso,
+        "frame_saturated_fraction": cap.saturated_fraction,
+        "core_saturated_fraction_mean": float(np.nanmean([m["saturated_fraction"] for m in saturation])),
+        "core_saturated_fraction_max": float(np.nanmax([m["saturated_fraction"] for m in saturation])),
+        "marker_spacing_px": _min_spacing(truth_uv),
+        "core_diameter_px": float(2 * np.mean([m["core_radius_px"] for m in saturation])),
+        "worker_peak_rss_MiB": _peak_rss_mib(),
+        **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
+    }
+    intrinsics = Intrinsics.from_geometry(camera.geometry)
+    rows = []
+    for tracker, label, settings in _detectors(task):
+        tracked: dict = {}  # the tracker runs once; each estimator reuses its result
+        for estimator in task.get("estimators", tuple(ESTIMATORS)):
+            ev = evaluate_detection(
+                image_bgr,
+                intrinsics,
+                truth,
+                tracker=tracker,
+                estimator=estimator,
+                beacon=scenario.beacon,
+                crop_origin_px=(cap.x0, cap.y0),
+                thesis_settings=settings,
+                track_cache=tracked,
+            )
+            rows.append(
+                {
+                    **base,
+                    "tracker": tracker,
+                    "thresholds": label,
+                    "estimator": estimator,
+                    "detected": bool(ev["detected"]),
+                    "side_detected": ev.get("side"),
+                    "side_correct": bool(ev.get("side_correct")),
+                    "numbering_correct": bool(ev.get("numbering_correct")),
+                    "centroid_rms_px": _num(ev.get("centroid_rms_px")),
+                    "range_est_m": _num(ev.get("range_m")),
+                    "range_err_m": _num(ev.get("range_error_m")),
+                    "yaw_est_deg": _num(ev.get("yaw_deg")),
+                    "yaw_err_deg": _num(ev.get("yaw_error_deg")),
+                    "reason": ev.get("reason") or "",
+                    "failure": ev.get("failure") or "",
+                    "side_blobs": ev.get("side_blobs"),
+                }
+            )
+    return rows
+
+
+def _detectors(task: dict):
+    """(tracker, threshold label, thesis settings) to run: the study's tracker once per
+    HSV threshold variant in ``task["thesis_hsv_variants"]`` (label → per-colour boxes,
+    None for the study's own numbers), the best tracker once."""
+    variants = task.get("thesis_hsv_variants") or {"study": None}
+    for tracker in task.get("trackers", tuple(TRACKERS)):
+        if tracker != "thesis":
+            yield tracker, "", None
+            continue
+        for label, boxes in variants.items():
+            settings = None
+            if boxes:
+                ranges = {
+                    c: [tuple(tuple(int(x) for x in corner) for corner in box) for box in b] for c, b in boxes.items()
+                }
+                settings = ThesisTrackerSettings(hsv_ranges=ranges)
+            yield tracker, label, settings
+
+
+def marker_colours(image_bgr, uv, saturation: list[dict], origin: tuple[int, int]) -> list[dict]:
+    """Mean colour of each marker's core in the saved image (true positions, so it does
+    not depend on any detector): linear-RGB chromaticity (r, g) and mean sRGB (0-1)."""
+    h, w = image_bgr.shape[:2]
+    out = []
+    for (u, v), sat in zip(uv, saturation, strict=True):
+        r = max(sat["core_radius_px"], 1.0)
+        x, y = u - origin[0], v - origin[1]
+        c0, c1 = max(math.floor(x - r), 0), min(math.ceil(x + r) + 1, w)
+        r0, r1 = max(math.floor(y - r), 0), min(math.ceil(y + r) + 1, h)
+        if c1 <= c0 or r1 <= r0:
+            out.append({"r_chroma": math.nan, "g_chroma": math.nan, "R": math.nan, "G": math.nan, "B": math.nan})
+            continue
+        yy, xx = np.mgrid[r0:r1, c0:c1]
+        core = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+        srgb = image_bgr[r0:r1, c0:c1][core][:, ::-1].astype(np.float64) / 255.0
+        lin = colour.cctf_decoding(srgb, function="sRGB").mean(axis=0)
+        total = lin.sum()
+        mean_srgb = colour.cctf_encoding(lin, function="sRGB")
+        out.append(
+            {
+                "r_chroma": float(lin[0] / total) if total > 0 else math.nan,
+                "g_chroma": float(lin[1] / total) if total > 0 else math.nan,
+                "R": float(mean_srgb[0]),
+                "G": float(mean_srgb[1]),
+                "B": float(mean_srgb[2]),
+            }
+        )
+    return out
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process so far, MiB (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _min_spacing(uv) -> float:
+    uv = np.asarray(uv, float)
+    d = np.hypot(*(uv[:, None, :] - uv[None, :, :]).transpose(2, 0, 1))
+    d[np.eye(len(uv), dtype=bool)] = np.inf
+    return float(d.min())
+
+
+def _num(x) -> float:
+    return float(x) if x is not None and np.isfinite(x) else math.nan
+
+
+def frame_inputs(task: dict):
+    """What a frame task's capture needs: (scenario, camera, render of the crop,
+    low-resolution full-frame background or None).
+
+    The background is rendered only where it is used: for automatic exposure's metering
+    and for full-frame captures. Renders of the last few geometries are kept in memory
+    at unit LED scale, so the frames of one render (drives, seeds) rescale them instead
+    of reading the cache again — light transport is linear, the bytes are the same.
+    """
+    scenario = frame_scenario(task)
+    camera = load_camera(scenario.camera)
+    needs_background = camera.exposure.mode == "auto" or bool(task.get("full_frame"))
+    key = json.dumps({**scenario.to_dict(), "led_current_mA": None, "background": needs_background}, sort_keys=True)
+    held = _RENDERS.pop(key, None)
+    if held is None:
+        cache = RenderCache()
+        held = (render(scenario, cache), render_background(scenario, cache) if needs_background else None)
+    _RENDERS[key] = held  # most recently used last
+    while len(_RENDERS) > 4:
+        _RENDERS.pop(next(iter(_RENDERS)))
+    radiance, background = (None if r is None else with_led_current(r, scenario.current_mA) for r in held)
+    return scenario, camera, radiance, background
+
+
+_RENDERS: dict[str, tuple] = {}
+"""Renders (crop, background) of the most recently used geometries in this process."""
+
+
+def render_batch_key(task: dict) -> str:
+    """Label of the frames that share a task's render (everything but drive and seed);
+    the runner sends them to one worker together (:func:`studies.engine.runner.run_tasks`)."""
+    scenario = {k: v for k, v in task["scenario"].items() if k != "led_current_mA"}
+    return json.dumps([scenario, task.get("render", {}), bool(task.get("full_frame"))], sort_keys=True)
+
+
+def saved_frame(task: dict):
+    """The image the camera saves for a task (decoded JPEG, BGR) and its frame origin."""
+    _, camera, radiance, background = frame_inputs(task)
+    cap = capture(radiance, camera, int(task["seed"]), background, full=False)
+    return cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR), (cap.x0, cap.y0)
+
+
+def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:
+    """The saved image around the target (±``half_width_m`` at the marker plane), scaled
+    to ``size_px`` with nearest-neighbour so camera pixels stay visible; PNG bytes."""
+    scenario, camera, _, _ = frame_inputs(task)
+    image, (x0, y0) = saved_frame(task)
+    u, v = marker_pixels(camera, scenario)[0] - np.array([x0, y0])
+    half = max(2, round(half_width_m * camera.geometry.focal_length_px / scenario.range_m))
+    padded = cv2.copyMakeBorder(image, half, half, half, half, cv2.BORDER_CONSTANT, value=(0, 0, 0))
+    cu, cv_ = round(u) + half, round(v) + half
+    crop = padded[cv_ - half : cv_ + half, cu - half : cu + half]
+    crop = cv2.resize(crop, (size_px, size_px), interpolation=cv2.INTER_NEAREST)
+    ok, png = cv2.imencode(".png", crop)
+    if not ok:
+        raise RuntimeError("mosaic: PNG encoding failed")
+    return png.tobytes()

@@ -1,0 +1,103 @@
+"""A sweep: frame tasks run through the runner and written as result tables.
+
+:func:`run_frames` sends a study's frame tasks (:mod:`studies.engine.tasks`) to
+:func:`studies.engine.runner.run_tasks` with the frames of each render batched;
+:func:`sweep` and :func:`sweep_in_chunks` turn their rows into the study's tables
+(:mod:`studies.engine.tables`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from scenes.render_cache import atomic_write_bytes, content_key
+from studies.engine.frame import FRAME_VERSION, render_batch_key, simulate_frame
+from studies.engine.runner import Progress, no_progress, run_tasks
+from studies.engine.tables import parquet_bytes, write_tables
+from studies.engine.tasks import StudyOptions, frame_tasks
+
+
+@dataclass(frozen=True)
+class Execution:
+    """Where a sweep's frames run and how progress is shown (see
+    :func:`studies.engine.runner.run_tasks`): ``workers`` local processes (default: one
+    per CPU), or the Dask ``scheduler`` at that address; ``progress`` display."""
+
+    workers: int | None = None
+    scheduler: str | None = None
+    progress: Progress = no_progress
+
+
+def run_frames(
+    tasks: Sequence[dict], out: Path, execution: Execution = Execution(), description: str = "frames"
+) -> list[dict]:
+    """Run frame tasks (:func:`studies.engine.frame.simulate_frame`) with the frames of each
+    render batched into one worker; rows in task order."""
+    return run_tasks(
+        tasks,
+        out,
+        simulate_frame,
+        workers=execution.workers,
+        scheduler=execution.scheduler,
+        description=description,
+        progress=execution.progress,
+        batch_key=render_batch_key,
+    )
+
+
+def sweep(
+    name: str,
+    conditions: Iterable[dict],
+    options: StudyOptions,
+    out: Path,
+    estimators: Sequence[str] | None = None,
+    execution: Execution = Execution(),
+) -> pd.DataFrame:
+    """Frame tasks of ``conditions`` run (:func:`run_frames`) and written as result
+    tables; returns the DataFrame."""
+    tasks = frame_tasks(conditions, options, estimators=estimators)
+    return write_tables(out, run_frames(tasks, out, execution, description=name))
+
+
+def sweep_in_chunks(
+    name: str,
+    chunks: Sequence[list[dict]],
+    options: StudyOptions,
+    out: Path,
+    estimators: Sequence[str] | None = None,
+    execution: Execution = Execution(),
+    frames: Callable[..., list[dict]] = run_frames,
+) -> pd.DataFrame:
+    """:func:`sweep` for grids too large to hold as row dicts (millions of frames).
+
+    Each chunk of conditions (whole geometries, so no render batch straddles two chunks)
+    is made into tasks, run and reduced to a DataFrame with categorical text columns
+    before the next one starts, so the parent holds one chunk's tasks and rows at a time
+    (about 4 kB per row as dicts, about 0.5 kB as columns). A finished chunk's table is
+    stored under ``out/chunks`` keyed by the content of its tasks, so a re-run whose
+    results are all stored reads 1 file per chunk instead of one per frame. ``frames``
+    runs a chunk's tasks (signature of :func:`run_frames`; the benchmark passes stand-ins).
+    """
+    parts = []
+    for i, conditions in enumerate(chunks):
+        tasks = frame_tasks(conditions, options, estimators=estimators)
+        path = Path(out) / "chunks" / f"{content_key('chunk', FRAME_VERSION, tasks)}.parquet"
+        if path.is_file():
+            parts.append(pd.read_parquet(path))
+            continue
+        rows = frames(tasks, out, execution, description=f"{name} {i + 1}/{len(chunks)}")
+        part = pd.DataFrame(rows)
+        del rows
+        for column in part.select_dtypes(include=["object", "str"]).columns:
+            part[column] = part[column].astype("category")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(path, parquet_bytes(part))
+        parts.append(pd.read_parquet(path))  # as a re-run reads it: cold and warm runs agree
+    frame = pd.concat(parts, ignore_index=True)
+    for column in frame.select_dtypes(include="category").columns:  # back to the dtype of its values
+        frame[column] = frame[column].astype(frame[column].cat.categories.dtype)
+    return write_tables(out, frame)

@@ -1,0 +1,50 @@
+"""Result tables: results.parquet / results.csv (one row per frame × detector) and the
+detection curves drawn from them."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+
+from scenes.render_cache import atomic_write_bytes
+from studies.engine.metrics import wilson_intervals
+from studies.engine.scoring import detection_successes
+
+CSV_MAX_ROWS = 1_000_000
+"""Above this many rows only results.parquet is written (a CSV would take gigabytes)."""
+
+
+def write_tables(out: Path, rows) -> object:
+    """results.parquet and, up to :data:`CSV_MAX_ROWS` rows, results.csv (one row per
+    frame × detector) from row dicts or a DataFrame; returns the DataFrame."""
+    frame = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows)
+    Path(out).mkdir(parents=True, exist_ok=True)
+    csv_path = Path(out) / "results.csv"
+    if len(frame) <= CSV_MAX_ROWS:
+        atomic_write_bytes(csv_path, frame.to_csv(index=False, float_format="%.9g").encode())
+    else:
+        csv_path.unlink(missing_ok=True)  # never leave an earlier run's table beside this one
+    atomic_write_bytes(Path(out) / "results.parquet", parquet_bytes(frame))
+    return frame
+
+
+def parquet_bytes(frame) -> bytes:
+    """A DataFrame as Parquet file bytes (no index)."""
+    buf = io.BytesIO()
+    frame.to_parquet(buf, index=False)
+    return buf.getvalue()
+
+
+def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
+    """Per group and x: frames, correct detections, Wilson 95 % interval."""
+    keys = [*by, x]
+    success = pd.Series(detection_successes(frame), index=frame.index)
+    counts = success.groupby([frame[k] for k in keys], sort=True).agg(["size", "sum"])
+    table = counts.reset_index().rename(columns={"size": "frames", "sum": "detected"})
+    table["frames"] = table["frames"].astype(int)
+    table["detected"] = table["detected"].astype(int)
+    table["p_detect"], table["p_low"], table["p_high"] = wilson_intervals(table["detected"], table["frames"])
+    return table[[*keys, "frames", "detected", "p_detect", "p_low", "p_high"]]

@@ -1,0 +1,173 @@
+"""What a study sweeps: its options, the grid of nominal conditions, and frame tasks with pose jitter.
+
+Frames of one nominal condition differ by sensor-noise seed and by a small pose jitter
+(range ±0.5 %, yaw ±0.5°, camera height ±5 mm, drawn deterministically from the
+condition's geometry and the jitter index), so detection probabilities are not those of
+a single lucky pose. ``jitter_poses`` jittered poses are rendered per condition; seeds
+cycle over them. The jitter does not depend on the LED drive, so every drive of a
+condition sees the same poses: drive sweeps are paired and reuse one render per pose.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from scenes.beacon import BEACON_NAMES
+from scenes.diffusers import DiffuserConfig
+from scenes.environment import ENVIRONMENT_NAMES
+from scenes.led import SIDE_COLOURS, led_for_side
+from scenes.view import camera_names
+
+RENDER = {"spp": 4, "oversampling": 2, "crop": "beacon", "near_field_spp": 1024}
+"""Render settings of study frames (near-field marker renders cached per configuration)."""
+
+
+@dataclass(frozen=True)
+class StudyOptions:
+    """What a study sweeps (each study has full and quick defaults)."""
+
+    cameras: tuple[str, ...]
+    beacons: tuple[str, ...] = ("v2",)
+    sides: tuple[str, ...] = ("red",)
+    ranges_m: tuple[float, ...] = (2.0, 5.0)
+    yaws_deg: tuple[float, ...] = (0.0,)
+    environments: tuple[str, ...] = ("dark",)
+    currents_mA: tuple[float, ...] = (20.0,)
+    seeds: int = 2
+    jitter_poses: int = 2
+    diffusers: tuple[tuple[bool, int, str], ...] = ((True, 1, "matched"),)
+    render: dict = field(default_factory=lambda: dict(RENDER))
+
+    def validate(self) -> None:
+        """Fail fast, before any work, with one line naming the bad option."""
+
+        _check_choices("cameras", self.cameras, camera_names())
+        _check_choices("beacons", self.beacons, BEACON_NAMES)
+        _check_choices("sides", self.sides, SIDE_COLOURS)
+        _check_choices("environments", self.environments, ENVIRONMENT_NAMES)
+        for name, values in (
+            ("ranges_m", self.ranges_m),
+            ("yaws_deg", self.yaws_deg),
+            ("currents_mA", self.currents_mA),
+        ):
+            if not values:
+                raise ValueError(f"{name}: expected at least one value, got an empty list")
+            if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
+                raise ValueError(f"{name}: expected finite numbers, got {list(values)}")
+        if min(self.ranges_m) <= 0:
+            raise ValueError(f"ranges_m: expected distances > 0 m, got {list(self.ranges_m)}")
+        if max(abs(y) for y in self.yaws_deg) > 90:
+            raise ValueError(f"yaws_deg: expected angles in [-90, 90], got {list(self.yaws_deg)}")
+        for current in self.currents_mA:
+            if current <= 0:
+                raise ValueError(f"currents_mA: expected currents > 0 mA, got {current!r}")
+            for side in self.sides:
+                led_for_side(side).check_current(current)
+        if not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ValueError(f"seeds: expected an integer >= 1, got {self.seeds!r}")
+        for foam, sheets, colour in self.diffusers:
+            DiffuserConfig(foam, sheets, colour).validate()
+
+    def with_overrides(self, **overrides) -> StudyOptions:
+        """These options with the user's non-None overrides."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+def _check_choices(name: str, values: Sequence[str], allowed: Sequence[str]) -> None:
+    if not values:
+        raise ValueError(f"{name}: expected at least one of {', '.join(allowed)}, got an empty list")
+    bad = [v for v in values if v not in allowed]
+    if bad:
+        raise ValueError(f"{name}: expected some of {', '.join(allowed)}, got unknown {', '.join(map(str, bad))}")
+
+
+GRID_AXES = {
+    "camera": "cameras",
+    "beacon": "beacons",
+    "side": "sides",
+    "environment": "environments",
+    "yaw_deg": "yaws_deg",
+    "range_m": "ranges_m",
+    "led_current_mA": "currents_mA",
+    "diffuser": "diffusers",
+}
+"""Axes of a study grid, in the default loop order (first outermost), and the
+:class:`StudyOptions` field holding each one's values."""
+
+
+def grid_conditions(o: StudyOptions, order: Sequence[str] = tuple(GRID_AXES)) -> list[dict]:
+    """Nominal conditions for every combination of the options' values, looping over
+    the axes of :data:`GRID_AXES` in ``order`` (first outermost; all eight named)."""
+    if sorted(order) != sorted(GRID_AXES):
+        raise ValueError(f"order: expected each of {', '.join(GRID_AXES)} once, got {', '.join(order)}")
+    out = []
+    for values in itertools.product(*(getattr(o, GRID_AXES[axis]) for axis in order)):
+        v = dict(zip(order, values, strict=True))
+        foam, sheets, colour = v["diffuser"]
+        out.append(
+            {
+                "beacon": v["beacon"],
+                "side": v["side"],
+                "range_m": float(v["range_m"]),
+                "yaw_deg": float(v["yaw_deg"]),
+                "camera": v["camera"],
+                "environment": v["environment"],
+                "led_current_mA": float(v["led_current_mA"]),
+                "foam": foam,
+                "paper_sheets": sheets,
+                "paper_colour": colour,
+            }
+        )
+    return out
+
+
+def jitter(condition: dict, index: int) -> dict:
+    """Deterministic small pose offsets for jittered pose ``index`` of a condition (0: none);
+    the same for every LED drive of the condition."""
+    if index == 0:
+        return {"range_scale": 1.0, "yaw_offset_deg": 0.0, "height_m": 0.0}
+    geometry = sorted((k, v) for k, v in condition.items() if k != "led_current_mA")
+    digest = hashlib.sha256(repr((geometry, index)).encode()).digest()
+    u = np.frombuffer(digest[:24], dtype=np.uint64).astype(np.float64) / 2.0**64 * 2 - 1  # three in (-1, 1)
+    return {"range_scale": 1.0 + 0.005 * u[0], "yaw_offset_deg": 0.5 * u[1], "height_m": 0.005 * u[2]}
+
+
+def frame_tasks(
+    conditions: Iterable[dict],
+    options: StudyOptions,
+    exposure: dict | None = None,
+    trackers: Sequence[str] | None = None,
+    estimators: Sequence[str] | None = None,
+) -> list[dict]:
+    """Frame tasks for every condition × seed (see module docstring).
+
+    A condition holds Scenario fields; ``range_m``/``yaw_deg`` are nominal and get jittered.
+    """
+    tasks = []
+    for condition in conditions:
+        for seed in range(options.seeds):
+            j = jitter(condition, seed % options.jitter_poses)
+            scenario = dict(condition)
+            scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
+            scenario["yaw_deg"] = round(max(-90.0, min(90.0, condition["yaw_deg"] + j["yaw_offset_deg"])), 9)
+            scenario["camera_height_m"] = round(j["height_m"], 9)
+            task = {
+                "scenario": scenario,
+                "render": dict(options.render),
+                "seed": seed,
+                "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]},
+            }
+            if exposure:
+                task["exposure"] = exposure
+            if trackers:
+                task["trackers"] = list(trackers)
+            if estimators:
+                task["estimators"] = list(estimators)
+            tasks.append(task)
+    return tasks

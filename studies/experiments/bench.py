@@ -1,0 +1,404 @@
+"""Benchmarks: speed as ratios measured side by side in one run on one machine.
+
+``two_stage_vs_brute_force`` — time to render the same V2 marker (foam + 1 matched
+sheet, 5 m, 10° off axis, T6 + 18 mm, 4× oversampled 20 × 20 px crop) to the same
+RMS error with the two-stage method (near-field precompute + textured face) and with
+brute-force volumetric path tracing. Each method's per-pass noise σ (per-pixel
+standard deviation over independent passes, RMS over the marker's pixels, divided by
+the marker's mean radiance) and time per pass t are measured; reaching an RMS error ε
+takes t·(σ/ε)² (Monte-Carlo error falls as 1/√samples), plus, for the two-stage
+method, its near-field precompute, which is also reported apart because it is paid
+once per marker configuration and cached.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from camera_models.camera import load_camera
+from camera_models.capture import capture
+from camera_models.exposure import manual_exposure
+from camera_models.isp import encode_jpeg
+from pipeline.detect import detect
+from scenes.beacon import beacon_design
+from scenes.led import led_for_side
+from scenes.near_field import NearFieldSettings, marker_emission
+from scenes.render import render, with_led_current
+from scenes.render_cache import RenderCache
+from scenes.scenario import RenderSettings, Scenario
+from studies.catalog import replication
+from studies.engine.frame import render_batch_key, simulate_frame
+from studies.engine.runner import run_tasks, worker_threads
+from studies.engine.sweep import Execution, run_frames, sweep_in_chunks
+from studies.engine.tasks import GRID_AXES, RENDER, frame_tasks
+from studies.experiments.two_stage_check import MarkerView, brute_force_scene, render_passes, two_stage_scene
+
+
+def _relative_noise(images: np.ndarray, mask: np.ndarray, reference: np.ndarray) -> float:
+    """Normalised RMS noise of one pass: √(mean over the marker of the per-pixel
+    variance across passes) / mean radiance of the marker."""
+    var = images[:, mask].var(axis=0, ddof=1)
+    return float(np.sqrt(var.mean()) / reference[mask].mean())
+
+
+def two_stage_vs_brute_force(target_rms: float = 0.01, passes: int = 16, brute_spp: int = 256) -> dict:
+    """Measure the two-stage speed-up at equal RMS error (see module docstring)."""
+
+    view = MarkerView()
+    near = NearFieldSettings()
+    with tempfile.TemporaryDirectory() as tmp:
+        cache = RenderCache(Path(tmp))
+        t0 = time.perf_counter()
+        marker_emission(beacon_design("v2"), led_for_side(view.side), view.housing, view.config, view.side, cache, near)
+        precompute_s = time.perf_counter() - t0
+        two = render_passes(two_stage_scene(view, 16, near, cache), passes)
+    brute = render_passes(brute_force_scene(view, brute_spp), passes)
+    reference = two.images.mean(axis=0)
+    mask = reference > 0.01 * reference.max()
+    sigma_two = _relative_noise(two.images, mask, reference)
+    sigma_brute = _relative_noise(brute.images, mask, reference)
+    t_two = two.seconds_per_pass * (sigma_two / target_rms) ** 2
+    t_brute = brute.seconds_per_pass * (sigma_brute / target_rms) ** 2
+    return {
+        "target_rms": target_rms,
+        "two_stage": {
+            "spp_per_pass": two.spp_per_pass,
+            "seconds_per_pass": two.seconds_per_pass,
+            "rms_per_pass": sigma_two,
+            "near_field_precompute_s": precompute_s,
+            "seconds_to_target": t_two + precompute_s,
+            "seconds_to_target_cached": t_two,
+        },
+        "brute_force": {
+            "spp_per_pass": brute.spp_per_pass,
+            "seconds_per_pass": brute.seconds_per_pass,
+            "rms_per_pass": sigma_brute,
+            "seconds_to_target": t_brute,
+        },
+        "ratio": t_brute / (t_two + precompute_s),
+        "ratio_cached": t_brute / t_two,
+    }
+
+
+# -- render reuse, full frame, workers, Dask, variant ----------------------------------------
+BENCH_SCENARIO = {
+    "beacon": "v2",
+    "side": "red",
+    "range_m": 5.0,
+    "yaw_deg": 10.0,
+    "camera": "canon-t6-18mm",
+    "environment": "dark",
+    "foam": True,
+    "paper_sheets": 1,
+    "paper_colour": "matched",
+}
+
+
+def reuse_vs_rerender(frames: int = 100, rerendered: int = 4) -> dict:
+    """A sweep of ``frames`` frames over LED drive, ISO and noise seed, with the render
+    reused (rendered once, rescaled in memory by linearity, the lens's work on it reused)
+    versus re-rendered for every frame.
+
+    Both time render + camera (optics, sensor, ISP, JPEG) per frame. The re-rendering
+    side runs ``rerendered`` frames and scales to ``frames`` (each costs the same render).
+    """
+
+    settings = RenderSettings(spp=4, oversampling=2, crop="beacon")
+    camera = load_camera(BENCH_SCENARIO["camera"])
+    currents, isos = (2.0, 5.0, 10.0, 20.0), (800.0, 1600.0, 3200.0, 6400.0)
+    grid = [(currents[i % 4], isos[(i // 4) % 4], i) for i in range(frames)]
+    render(Scenario(**BENCH_SCENARIO, render=settings))  # compile kernels and near field once, untimed
+
+    t0 = time.perf_counter()
+    base = render(Scenario(**BENCH_SCENARIO, render=settings), None)  # the one render
+    for current, iso, seed in grid:
+        capture(with_led_current(base, current), camera, seed, None, manual_exposure(camera, iso=iso), full=False)
+    reuse_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for current, iso, seed in grid[:rerendered]:
+        radiance = render(Scenario(**BENCH_SCENARIO, led_current_mA=current, render=settings), None)
+        capture(radiance, camera, seed, None, manual_exposure(camera, iso=iso), full=False)
+    rerender_s = (time.perf_counter() - t0) * frames / rerendered
+    return {
+        "frames": frames,
+        "reuse_s": reuse_s,
+        "rerender_s": rerender_s,
+        "rerender_frames_timed": rerendered,
+        "ratio": rerender_s / reuse_s,
+    }
+
+
+def frame_vs_memcpy(repeats: int = 3) -> dict:
+    """One full T6 frame through optics, sensor, ISP (JPEG) and both detectors, versus a
+    plain copy of the same frame's bytes (18 MP × 3 × 8 bit)."""
+
+
+    scenario = Scenario(**BENCH_SCENARIO, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
+    camera = load_camera(scenario.camera)
+    radiance = render(scenario)
+    stages = {"camera_s": [], "decode_s": [], "detect_s": []}
+    for seed in range(repeats):
+        t0 = time.perf_counter()
+        cap = capture(radiance, camera, seed, None, full=True)
+        t1 = time.perf_counter()
+        image = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)
+        t2 = time.perf_counter()
+        for tracker in ("thesis", "best"):
+            detect(image, scenario.camera, tracker=tracker, estimator="best")
+        t3 = time.perf_counter()
+        for k, v in zip(stages, (t1 - t0, t2 - t1, t3 - t2), strict=True):
+            stages[k].append(v)
+    frame = np.ascontiguousarray(cap.image.rgb8)
+    copies = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        frame.copy()
+        copies.append(time.perf_counter() - t0)
+    codec = []  # the floor of any saved-JPEG frame: encoding it and reading it back
+    for _ in range(3):
+        t0 = time.perf_counter()
+        jpeg = encode_jpeg(frame, camera)
+        cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+        codec.append(time.perf_counter() - t0)
+    per_frame = float(np.median([sum(x) for x in zip(*stages.values(), strict=True)]))
+    memcpy = float(np.median(copies))
+    return {
+        "frame_s": per_frame,
+        "memcpy_s": memcpy,
+        "ratio": per_frame / memcpy,
+        **{k: float(np.median(v)) for k, v in stages.items()},
+        "jpeg_encode_decode_s": float(np.median(codec)),
+        "jpeg_codec_vs_memcpy": float(np.median(codec)) / memcpy,
+        "frame_bytes": int(frame.nbytes),
+    }
+
+
+def _sweep_tasks(n: int, render_seed: int) -> list[dict]:
+    """``n`` study frame tasks, each a distinct pose (its own render), as in a range sweep."""
+    return [
+        {
+            "scenario": {**BENCH_SCENARIO, "led_current_mA": 2.0, "range_m": 4.0 + 0.25 * k},
+            "render": {**RENDER, "seed": render_seed},
+            "seed": 0,
+            "trackers": ["best"],
+            "estimators": ["best"],
+        }
+        for k in range(n)
+    ]
+
+
+def workers_and_dask(tasks: int = 12) -> dict:
+    """Study throughput on the same kind of frame tasks — each renders its own pose — with
+    1 and 2 single-threaded local worker processes and on a 2-worker Dask LocalCluster,
+    plus one worker using every core (Dr.Jit and OpenCV threads) for comparison. Each
+    configuration uses its own render seed, so none finds another's renders in the cache;
+    the near-field marker render they share is computed beforehand (untimed)."""
+
+    from dask.distributed import LocalCluster
+
+
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    times = {}
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            warm = _sweep_tasks(1, 0)[0]
+            simulate_frame({**warm, "scenario": {**warm["scenario"], "range_m": 20.0}})  # near field, untimed
+            for k, label in enumerate(("workers_1", "workers_2", "dask_2", "workers_1_all_cores")):
+                work = _sweep_tasks(tasks, render_seed=1000 + k)
+                t0 = time.perf_counter()
+                if label == "dask_2":
+                    # `--scheduler ADDRESS` connects to a running cluster: its start-up is
+                    # timed apart, like the local pool's, whose processes start inside run_tasks
+                    with (
+                        worker_threads(2, 1),
+                        LocalCluster(
+                            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+                        ) as cluster,
+                    ):
+                        times["dask_start"] = time.perf_counter() - t0
+                        t0 = time.perf_counter()
+                        run_tasks(work, Path(tmp) / label, simulate_frame, scheduler=cluster.scheduler_address)
+                        times[label] = time.perf_counter() - t0
+                    continue
+                elif label == "workers_1_all_cores":
+                    with worker_threads(1):
+                        run_tasks(work, Path(tmp) / label, simulate_frame, workers=1)
+                else:  # single-threaded worker processes, each task alone
+                    n = int(label[-1])
+                    run_tasks(work, Path(tmp) / label, simulate_frame, workers=n, threads_per_worker=1, isolated=True)
+                times[label] = time.perf_counter() - t0
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
+    return {
+        "tasks": tasks,
+        **{f"{k}_s": v for k, v in times.items()},
+        "workers_2_vs_1": times["workers_1"] / times["workers_2"],
+        "dask_overhead": times["dask_2"] / times["workers_2"] - 1.0,
+        "dask_overhead_with_cluster_start": (times["dask_start"] + times["dask_2"]) / times["workers_2"] - 1.0,
+        "all_cores_1_worker_vs_2_workers": times["workers_1_all_cores"] / times["workers_2"],
+    }
+
+
+def full_grid_estimate(batches: int = 12, seed: int = 0) -> dict:
+    """Time of the complete replication grid (:mod:`studies.catalog.replication`, full form) on
+    this machine, extrapolated from a random sample of its render batches (a geometry
+    with all its drives and seeds), run with 2 workers once with an empty render cache
+    (cold) and once more with the renders cached but every frame recomputed (warm).
+
+    Near-field marker renders (one per diffuser configuration and colour) are made
+    beforehand and counted apart, at their measured time each.
+    """
+
+    options = replication.default_options(quick=False)
+    currents = options.currents_mA
+    # one task per geometry and jittered pose names every render batch of the grid (the
+    # jitter does not depend on the drive), without building all 2.15 M frame tasks
+    geometries = [c for c in replication.conditions(options) if c["led_current_mA"] == currents[0]]
+    one_per_pose = replace(options, seeds=options.jitter_poses)
+    batch_geometry = {render_batch_key(t): g for g in geometries for t in frame_tasks([g], one_per_pose)}
+    sample = random.Random(seed).sample(sorted(batch_geometry), batches)
+    groups = {}
+    for key in sample:  # the batch's frames: every drive and seed of its geometry and pose
+        drives = [{**batch_geometry[key], "led_current_mA": c} for c in currents]
+        groups[key] = [t for t in frame_tasks(drives, options, estimators=["best"]) if render_batch_key(t) == key]
+    work = [t for key in sample for t in groups[key]]
+    near_fields = {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            near_s = []
+            for key in sample:  # the sample's near fields, untimed in the batches; timed here
+                t = groups[key][0]
+                t0 = time.perf_counter()
+                simulate_frame({**t, "scenario": {**t["scenario"], "range_m": 40.0}})  # tiny crop: ~all near field
+                near_s.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            run_frames(work, Path(tmp) / "cold", Execution(workers=2))
+            cold = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            run_frames(work, Path(tmp) / "warm", Execution(workers=2))
+            warm = time.perf_counter() - t0
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
+    scale = len(batch_geometry) / batches
+    near_field_s = float(np.max(near_s)) * len(near_fields)  # the slowest as an upper bound per near field
+    return {
+        "frames": len(geometries) * len(currents) * options.seeds,
+        "render_batches": len(batch_geometry),
+        "sampled_batches": batches,
+        "sampled_frames": len(work),
+        "sample_cold_s": cold,
+        "sample_warm_s": warm,
+        "near_fields": len(near_fields),
+        "near_fields_s": near_field_s,
+        "cold_h": (cold * scale + near_field_s) / 3600.0,
+        "warm_h": warm * scale / 3600.0,
+        "cold_ms_per_frame": 1e3 * cold / len(work),
+        "warm_ms_per_frame": 1e3 * warm / len(work),
+    }
+
+
+def variant_ratio() -> dict:
+    """The same small render with the active (LLVM/CUDA) variant and the scalar one, each
+    in its own process (a process keeps one backend)."""
+
+    code = (
+        "import time; from scenes.render import render; from scenes.scenario import Scenario, RenderSettings;"
+        "from scenes.mitsuba_variant import select_variant; v = select_variant().variant;"
+        "s = Scenario(range_m=8.0, render=RenderSettings(spp=2, oversampling=1, crop='target'));"
+        "render(s, groups=['led:red']); t = time.perf_counter(); render(s, groups=['led:red']);"
+        "print(v, time.perf_counter() - t)"
+    )
+    out = {}
+    for backend in ("", "scalar"):
+        env = {**os.environ, "BEACON_SIM_VARIANT": backend} if backend else dict(os.environ)
+        env.pop("BEACON_SIM_VARIANT", None) if not backend else None
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=900)
+        if proc.returncode != 0:
+            raise RuntimeError(f"variant benchmark ({backend or 'default'}) failed: {proc.stderr.strip()[-300:]}")
+        name, seconds = proc.stdout.split()[-2:]
+        out["scalar" if backend else "fast"] = {"variant": name, "seconds": float(seconds)}
+    return {**out, "ratio": out["scalar"]["seconds"] / out["fast"]["seconds"]}
+
+
+def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: int = 16) -> dict:
+    """The replication study's table work at the full grid's size: tasks, content keys,
+    chunk tables and results.parquet (:func:`studies.engine.sweep.sweep_in_chunks`), run twice
+    into a temporary directory — the second time with every chunk stored, as a re-run
+    with a warm cache is — and the max-range fits, timed on ``fit_groups`` of the grid's
+    768 groups and scaled to all of them on ``workers`` processes.
+
+    Frames are not simulated: each task's rows are stand-ins, the rows of one of
+    ``template_tasks`` simulated frames of the grid (cycled) with the task's own
+    scenario, seed and nominal pose, so the tables have the real columns and types (the
+    fits' times depend on the outcomes, so they are indicative). Returns wall times (s),
+    the parent's peak resident memory (MiB) and the table's size.
+    """
+    options = replication.default_options(quick=False)
+    rng = random.Random(0)
+    one = [  # random single conditions of the grid
+        replace(options, **{field: (rng.choice(getattr(options, field)),) for field in GRID_AXES.values()})
+        for _ in range(template_tasks)
+    ]
+    conditions = [c for o in one for c in replication.conditions(o)]
+    tasks = frame_tasks(conditions, replace(options, seeds=1), estimators=["best"])
+    template_rows = [simulate_frame(t) for t in tasks]
+    rss_templates = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+    def stand_in(tasks, out, execution, description):
+        rows = []
+        for i, t in enumerate(tasks):
+            for row in template_rows[i % len(template_rows)]:
+                rows.append(
+                    {
+                        **row,
+                        **t["scenario"],
+                        "seed": t["seed"],
+                        "nominal_range_m": t["nominal"]["range_m"],
+                        "nominal_yaw_deg": t["nominal"]["yaw_deg"],
+                    }
+                )
+        return rows
+
+    times = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label in ("first", "rerun"):
+            t0 = time.perf_counter()
+            frame = sweep_in_chunks("replication", replication.chunks(options), options, Path(tmp), frames=stand_in)
+            times[label] = time.perf_counter() - t0
+    groups = frame[frame.tracker == "best"].groupby(list(replication.MAX_RANGE_BY), sort=True)
+    sample = rng.sample(sorted(groups.groups), fit_groups)
+    t0 = time.perf_counter()
+    for key in sample:
+        replication.group_max_range(groups.get_group(key))
+    fit_s = (time.perf_counter() - t0) / fit_groups
+    return {
+        "frames": len(frame) // 2,
+        "rows": len(frame),
+        "columns": frame.shape[1],
+        "tables_first_run_s": times["first"],
+        "tables_rerun_s": times["rerun"],
+        "fit_s_per_group": fit_s,
+        "fits_s_on_workers": fit_s * groups.ngroups / workers,
+        "parent_peak_rss_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "parent_peak_rss_after_templates_MiB": rss_templates,
+    }

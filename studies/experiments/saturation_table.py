@@ -1,0 +1,242 @@
+"""Issue 4: saturated fraction of each marker's core per camera, LED drive and paper count, at 2 m and 5 m.
+
+Every case goes through the real pipeline: Mitsuba render of the V2 beacon's red side
+(yaw 0, dark environment, black housing, white paper) → :func:`camera_models.capture.capture`
+(lens, exposure, sensor with noise, ISP) → :func:`camera_models.capture.marker_core_saturation`
+on the raw mosaic. The webcams meter the whole frame (low-resolution background render)
+and run their auto-exposure loop; the T6 uses the study's manual ISO 6400, 1/60 s.
+
+Diffusers: the bare LED (no foam, no paper) and foam with 0, 1 or 3 sheets of white paper.
+LED drive does not change the render (it scales the cached unit render), so each
+(camera, range, diffuser) is rendered once; near-field marker renders are cached per
+diffuser configuration. Render settings are modest (4 spp, 2× oversampling, only the
+facing target); the capture is of the crop only (the full frame adds nothing to the
+markers' pixels: metering uses the background render either way).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from camera_models.camera import load_camera
+from camera_models.capture import capture, marker_core_saturation
+from scenes.background import render_background
+from scenes.render import render
+from scenes.render_cache import RenderCache
+from scenes.scenario import RenderSettings, Scenario
+
+CAMERAS = ("canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920")
+RANGES_M = (2.0, 5.0)
+DRIVES_MA = (2.0, 5.0, 10.0, 20.0)
+DIFFUSERS = ((False, 0), (True, 0), (True, 1), (True, 3))
+"""(foam, paper sheets): the bare LED row, then foam with 0, 1 and 3 sheets."""
+
+FIELDS = (
+    "camera",
+    "range_m",
+    "foam",
+    "paper_sheets",
+    "led_current_mA",
+    "marker",
+    "core_radius_px",
+    "core_pixels",
+    "saturated_fraction",
+    "saturated_fraction_R",
+    "saturated_fraction_G",
+    "saturated_fraction_B",
+    "peak_DN",
+    "clip_DN",
+    "exposure_mode",
+    "exposure_s",
+    "iso",
+    "gain_code",
+    "analog_gain",
+    "ae_metered_mean",
+    "ae_settled",
+    "seed",
+)
+
+
+def _peak_dn(cap, u: float, v: float, r: float) -> int:
+    h, w = cap.raw.shape
+    c0, c1 = max(math.floor(u - r) - cap.x0, 0), min(math.ceil(u + r) - cap.x0 + 1, w)
+    r0, r1 = max(math.floor(v - r) - cap.y0, 0), min(math.ceil(v + r) - cap.y0 + 1, h)
+    patch = cap.raw[r0:r1, c0:c1]
+    return int(patch.max()) if patch.size else 0
+
+
+def ae_settled(history: Sequence[tuple[float, int, float]], tolerance: float = 0.02) -> bool:
+    """Whether the last three auto-exposure frames kept the same settings (within ``tolerance``)."""
+    if len(history) < 3:
+        return False
+    last = history[-3:]
+    t0, g0 = last[-1][0], last[-1][1]
+    return all(abs(t / t0 - 1.0) <= tolerance and g == g0 for t, g, _ in last)
+
+
+def saturation_rows(
+    cameras: Sequence[str] = CAMERAS,
+    ranges_m: Sequence[float] = RANGES_M,
+    drives_mA: Sequence[float] = DRIVES_MA,
+    diffusers: Sequence[tuple[bool, int]] = DIFFUSERS,
+    spp: int = 4,
+    oversampling: int = 2,
+    seed: int = 0,
+    cache=None,
+    progress: Callable[[str], None] | None = None,
+) -> list[dict]:
+    """One row per (camera, range, diffuser, drive, marker); see :data:`FIELDS`."""
+
+    cache = RenderCache() if cache is None else cache
+    settings = RenderSettings(spp=spp, oversampling=oversampling, seed=seed, crop="target")
+    rows = []
+    for name in cameras:
+        cam = load_camera(name)
+        clip = min(cam.sensor.white_level_DN, 2**cam.sensor.adc_bits - 1)
+        for range_m in ranges_m:
+            for foam, sheets in diffusers:
+                for drive in drives_mA:
+                    t0 = time.perf_counter()
+                    scenario = Scenario(
+                        beacon="v2",
+                        side="red",
+                        range_m=float(range_m),
+                        yaw_deg=0.0,
+                        camera=name,
+                        environment="dark",
+                        led_current_mA=float(drive),
+                        foam=foam,
+                        paper_sheets=sheets,
+                        paper_colour="white",
+                        render=settings,
+                    )
+                    radiance = render(scenario, cache)
+                    background = render_background(scenario, cache)
+                    cap = capture(radiance, cam, seed, background=background, full=False)
+                    e = cap.exposure
+                    for m in marker_core_saturation(cap, cam, scenario):
+                        rows.append(
+                            {
+                                "camera": name,
+                                "range_m": float(range_m),
+                                "foam": foam,
+                                "paper_sheets": sheets,
+                                "led_current_mA": float(drive),
+                                "marker": m["id"],
+                                "core_radius_px": round(m["core_radius_px"], 3),
+                                "core_pixels": m["core_pixels"],
+                                "saturated_fraction": round(m["saturated_fraction"], 4),
+                                **{f"saturated_fraction_{c}": round(m["saturated_fraction_cfa"][c], 4) for c in "RGB"},
+                                "peak_DN": _peak_dn(cap, m["u"], m["v"], m["core_radius_px"]),
+                                "clip_DN": int(clip),
+                                "exposure_mode": e.mode,
+                                "exposure_s": e.exposure_s,
+                                "iso": e.iso,
+                                "gain_code": e.gain_code,
+                                "analog_gain": round(e.analog_gain, 4),
+                                "ae_metered_mean": round(e.history[-1][2], 5) if e.history else None,
+                                "ae_settled": ae_settled(e.history) if e.history else None,
+                                "seed": seed,
+                            }
+                        )
+                    if progress is not None:
+                        sat = np.mean([r["saturated_fraction"] for r in rows[-5:]])
+                        progress(
+                            f"{name} {range_m:g} m foam={foam} sheets={sheets} {drive:g} mA: "
+                            f"mean core saturation {sat:.3f}, t={e.exposure_s:.4g} s gain x{e.analog_gain:.3g} "
+                            f"({time.perf_counter() - t0:.1f} s)"
+                        )
+    return rows
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    """Write the rows with :data:`FIELDS` as header."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if r[k] is None else r[k]) for k in FIELDS})
+
+
+def _diffuser_label(foam: bool, sheets: int) -> str:
+    return "bare LED" if not foam and sheets == 0 else f"foam + {sheets} sheet{'s' if sheets != 1 else ''}"
+
+
+def summary_markdown(rows: list[dict]) -> str:
+    """Short report: mean (min-max over the 5 markers) core saturation per case; webcam exposure per case."""
+    cams = list(dict.fromkeys(r["camera"] for r in rows))
+    ranges = sorted({r["range_m"] for r in rows})
+    drives = sorted({r["led_current_mA"] for r in rows})
+    diffs = list(dict.fromkeys((r["foam"], r["paper_sheets"]) for r in rows))
+    lines = [
+        "# Marker-core saturation: V2 red side, yaw 0, dark, white paper",
+        "",
+        "Fraction of raw pixels at the clip level inside each marker's lit-face image (at least the",
+        "1-px disc), all colour sites together: mean over the 5 markers (min-max when they differ",
+        "by more than 0.01). T6: manual ISO 6400, 1/60 s; webcams: their auto exposure, metering",
+        "the whole (dark) frame. Render: 4 spp, 2× oversampling, facing target only. With the",
+        "Bayer mosaic (¼ R, ½ G, ¼ B sites) a red LED clips the R sites first: 0.25 ≈ R only, 0.75 ≈ R and G,",
+        "1.00 = every site (per-site fractions and the peak DN are in the CSV).",
+        "",
+    ]
+
+    def cell(sel):
+        v = [r["saturated_fraction"] for r in sel]
+        lo, hi, mean = min(v), max(v), float(np.mean(v))
+        return f"{mean:.2f}" if hi - lo <= 0.01 else f"{mean:.2f} ({lo:.2f}-{hi:.2f})"
+
+    for name in cams:
+        for rng in ranges:
+            sub = [r for r in rows if r["camera"] == name and r["range_m"] == rng]
+            if not sub:
+                continue
+            core = sub[0]["core_pixels"], sub[0]["core_radius_px"]
+            lines += [
+                f"## {name}, {rng:g} m (marker 1 core: {core[0]} px, radius {core[1]:.2f} px)",
+                "",
+                "| diffuser | " + " | ".join(f"{d:g} mA" for d in drives) + " |",
+                "|---|" + "---|" * len(drives),
+            ]
+            for foam, sheets in diffs:
+                cells = []
+                for d in drives:
+                    sel = [
+                        r for r in sub if (r["foam"], r["paper_sheets"]) == (foam, sheets) and r["led_current_mA"] == d
+                    ]
+                    cells.append(cell(sel) if sel else "")
+                lines.append(f"| {_diffuser_label(foam, sheets)} | " + " | ".join(cells) + " |")
+            lines.append("")
+    auto = [r for r in rows if r["exposure_mode"] == "auto" and r["marker"] == 1]
+    if auto:
+
+        lines += [
+            "## Webcam auto exposure (settled values)",
+            "",
+            "Settings after the auto-exposure loop (settled: the last three frames unchanged) and",
+            "the frame mean it metered, as a fraction of clip (its target is "
+            f"{load_camera(auto[0]['camera']).exposure.target_mean:g}); 'limits' marks exposure",
+            "and gain both at their maxima.",
+            "",
+            "| camera | range | diffuser | drive | exposure | gain code | analog gain | metered mean | settled |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in auto:
+            cam = load_camera(r["camera"])
+            at_limits = (
+                abs(r["exposure_s"] / cam.exposure.max_exposure_s - 1) < 1e-6
+                and r["gain_code"] == cam.sensor.gain_code_max
+            )
+            state = ("yes" if r["ae_settled"] else "no") + (", limits" if at_limits else "")
+            lines.append(
+                f"| {r['camera']} | {r['range_m']:g} m | {_diffuser_label(r['foam'], r['paper_sheets'])} | "
+                f"{r['led_current_mA']:g} mA | {r['exposure_s'] * 1e3:.2f} ms | {r['gain_code']} | "
+                f"{r['analog_gain']:.2f} | {r['ae_metered_mean']:.4f} | {state} |"
+            )
+        lines.append("")
+    return "\n".join(lines)

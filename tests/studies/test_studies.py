@@ -1,0 +1,209 @@
+"""Studies end to end on tiny grids: files, tables, reports that render in Chromium."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from studies.catalog import brightness_diffuser, range_limit, replication, validate, webcam_vs_dslr
+from studies.engine.sweep import Execution
+
+pytestmark = pytest.mark.usefixtures("mitsuba_variant")
+TINY = {"spp": 2, "oversampling": 1, "crop": "target", "near_field_spp": 64}
+
+
+def _check_outputs(out, summary_keys=()):
+    for name in ("report.html", "results.csv", "results.parquet", "summary.json"):
+        assert (out / name).is_file(), name
+    summary = json.loads((out / "summary.json").read_text())
+    for key in summary_keys:
+        assert key in summary
+    csv = pd.read_csv(out / "results.csv")
+    parquet = pd.read_parquet(out / "results.parquet")
+    assert len(csv) == len(parquet) > 0
+    return summary, csv
+
+
+def test_webcam_vs_dslr_tiny(tmp_path):
+    o = webcam_vs_dslr.default_options(True).with_overrides(
+        cameras=("logitech-c270",), sides=("red", "green"), ranges_m=(4.0,), seeds=1, render=TINY
+    )
+    webcam_vs_dslr.run(tmp_path, o, Execution(workers=1))
+    _, csv = _check_outputs(tmp_path, ("ranking", "max_range", "colour_separability"))
+    assert set(csv.tracker) == {"thesis", "best"} and set(csv.estimator) == {"thesis", "best"}
+    assert (tmp_path / "mosaic.png").stat().st_size > 1000
+
+
+def test_brightness_diffuser_tiny(tmp_path):
+    o = brightness_diffuser.default_options(True).with_overrides(
+        cameras=("logitech-c270",), currents_mA=(2.0, 20.0), diffusers=((True, 1, "white"),), seeds=1, render=TINY
+    )
+    summary = brightness_diffuser.run(tmp_path, o, Execution(workers=1))
+    _check_outputs(tmp_path, ("recommended",))
+    powers = {c["led_current_mA"]: c["led_power_mW"] for c in summary["configurations"]}
+    assert powers[20.0] == pytest.approx(10 * powers[2.0], rel=1e-9)  # red LED, γ = 1
+
+
+def test_range_limit_tiny(tmp_path):
+    o = range_limit.default_options(True).with_overrides(
+        cameras=("logitech-c270",), yaws_deg=(0.0,), ranges_m=(3.0, 6.0), seeds=1, render=TINY
+    )
+    summary = range_limit.run(tmp_path, o, Execution(workers=1))
+    _check_outputs(tmp_path, ("max_range",))
+    rec = summary["max_range"][0]
+    assert set(rec) >= {"camera", "beacon", "side", "yaw_deg", "max_range_m", "low_m", "high_m", "limiting_cause"}
+
+
+def test_replication_grid_is_the_issues_grid_and_runs_tiny(tmp_path):
+    full = replication.default_options(False)
+    # V1/V2 × 4 colours × 1-10 m × 0-30° in 5° × 4 cameras × 0-5 sheets ± foam × 8 drives × 10 seeds
+    assert len(replication.conditions(full)) * full.seeds == 2 * 4 * 10 * 7 * 4 * 12 * 8 * 10
+    assert len(set(full.currents_mA)) == 8 and len(set(full.diffusers)) == 12
+    o = replication.default_options(True).with_overrides(
+        cameras=("logitech-c270",), ranges_m=(3.0, 6.0), yaws_deg=(0.0,), currents_mA=(2.0,), seeds=1, render=TINY
+    )
+    summary = replication.run(tmp_path, o, Execution(workers=1))
+    _check_outputs(tmp_path, ("max_range",))
+    assert len(summary["max_range"]) == len(o.diffusers)  # one camera, beacon and drive
+    assert (tmp_path / "configurations.csv").is_file()
+
+
+def test_validate_tiny(tmp_path, monkeypatch):
+    pairs = validate.test_conditions(True)
+    subset = [next(p for p in pairs if p[0] == "preliminary" and p[1]["side"] == "red")]
+    subset += [next(p for p in pairs if p[0] == "range" and p[1]["range_m"] == 10.0)]
+    subset += [next(p for p in pairs if p[0] == "primary")]
+    monkeypatch.setattr(validate, "test_conditions", lambda quick: subset)
+    monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
+    rows = validate.run(tmp_path, True, Execution(workers=1), seeds=1)
+    table = pd.read_csv(tmp_path / "validation.csv")
+    assert list(table.columns[:12]) == [
+        "test",
+        "camera",
+        "beacon",
+        "side",
+        "environment",
+        "range_m",
+        "yaw_deg",
+        "detected_fraction",
+        "merged_or_lost_fraction",
+        "colour_correct_fraction",
+        "range_est_m",
+        "yaw_est_deg",
+    ]
+    # the preliminary test once; the later tests with the study's and the derived thresholds
+    assert len(rows) == len(table) == 1 + 2 * 2
+    assert set(table.thresholds) == {"study", "derived"}
+    derived = json.loads((tmp_path / "derived_thresholds.json").read_text())
+    assert derived["red"] and not derived["blue"]  # only red was captured here
+    verdicts = json.loads((tmp_path / "summary.json").read_text())["conclusions"]
+    assert {v["thresholds"] for v in verdicts} == {"study", "derived"}
+    assert all(v["simulation"] in ("agree", "disagree") for v in verdicts)
+
+
+def _tiny_options(**kw):
+    from studies.engine.tasks import StudyOptions
+
+    kw["render"] = TINY
+    return StudyOptions(**kw)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is installed by scripts/setup.sh")
+def test_report_renders_in_headless_chromium(tmp_path):
+    playwright = pytest.importorskip("playwright.sync_api")
+    o = range_limit.default_options(True).with_overrides(
+        cameras=("logitech-c270",), yaws_deg=(0.0,), ranges_m=(3.0, 6.0), seeds=1, render=TINY
+    )
+    range_limit.run(tmp_path, o, Execution(workers=1))
+    errors = []
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(
+            executable_path=shutil.which("chromium"),
+            args=["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"],
+        )
+        page = browser.new_page()
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto((tmp_path / "report.html").as_uri())
+        images = page.eval_on_selector_all("img", "els => els.map(e => [e.complete, e.naturalWidth])")
+        title = page.title()
+        browser.close()
+    assert title.startswith("Range limit")
+    assert images and all(done and width > 0 for done, width in images)
+    assert errors == []
+
+
+def test_threshold_overlap_detection():
+    from pipeline.thesis_tracker import ThesisTrackerSettings
+
+    study = {c: [[list(lo), list(hi)] for lo, hi in b] for c, b in ThesisTrackerSettings().ranges().items()}
+    # red and blue share hues but not saturations; the study's blue and green boxes do meet (H 84-85, S 64-143)
+    assert validate.overlapping_colours(study) == ["blue/green"]
+    wide = {"red": [[[0, 0, 100], [179, 255, 255]]], "green": [[[60, 50, 100], [80, 255, 255]]]}
+    assert validate.overlapping_colours(wide) == ["green/red"]
+
+
+def _fake_rows(tasks):
+    """Rows as simulate_frame shapes them (text, None, bool, int, float, NaN), per task."""
+    rows = []
+    for t in tasks:
+        sc, seed = t["scenario"], t["seed"]
+        for tracker in ("thesis", "best"):
+            r = sc["range_m"]  # all at 2 m, half at 5 m, none at 9 m: a finite logistic fit
+            ok = tracker == "best" and (r < 4 or (r < 7 and seed % 2 == 0))
+            rows.append(
+                {
+                    **sc,
+                    "seed": seed,
+                    "nominal_range_m": t["nominal"]["range_m"],
+                    "tracker": tracker,
+                    "detected": ok,
+                    "side_correct": ok,
+                    "numbering_correct": ok,
+                    "side_detected": sc["side"] if ok else None,
+                    "range_err_m": 0.01 * seed if ok else float("nan"),
+                    "yaw_err_deg": 0.1 * seed if ok else float("nan"),
+                    "reason": "" if ok else "red: 3 blob(s), 2 marker(s) lost or merged",
+                }
+            )
+    return rows
+
+
+def test_chunked_sweep_equals_one_sweep_and_rereads_only_chunk_tables(tmp_path, monkeypatch):
+    from studies.engine import sweep as common
+
+    o = replication.default_options(True).with_overrides(ranges_m=(2.0, 5.0, 9.0), seeds=3)
+    calls = []
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: calls.append(len(tasks)) or _fake_rows(tasks))
+    whole = common.sweep("x", replication.conditions(o), o, tmp_path / "whole")
+    chunked = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert len(replication.chunks(o)) == 4 and sum(calls[1:]) == calls[0] == len(whole) // 2
+    pd.testing.assert_frame_equal(whole, chunked, check_exact=True)
+    # a re-run with every chunk stored reads 4 tables and runs no frame, and gives the same bytes
+    before = (tmp_path / "chunked" / "results.parquet").read_bytes()
+    calls.clear()
+    again = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert calls == [] and (tmp_path / "chunked" / "results.parquet").read_bytes() == before
+    pd.testing.assert_frame_equal(again, chunked, check_exact=True)
+    # above CSV_MAX_ROWS only parquet is written, and an older CSV is removed
+    monkeypatch.setattr(common, "CSV_MAX_ROWS", 10)
+    common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
+    assert not (tmp_path / "chunked" / "results.csv").exists()
+    assert len(pd.read_parquet(tmp_path / "chunked" / "results.parquet")) == len(whole)
+
+
+def test_replication_max_range_fits_in_a_pool_equal_the_fits_in_process(tmp_path, monkeypatch):
+    from studies.engine import sweep as common
+
+    o = replication.default_options(True).with_overrides(
+        cameras=("logitech-c270",), diffusers=((True, 1, "matched"),), ranges_m=(2.0, 5.0, 9.0), seeds=3
+    )
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: _fake_rows(tasks))
+    frame = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path)
+    one, two = replication.max_range_table(frame, workers=1), replication.max_range_table(frame, workers=2)
+    assert len(one) == 2 and np.all((one.max_range_m > 2) & (one.max_range_m < 9))  # one per drive
+    pd.testing.assert_frame_equal(one, two, check_exact=True)
