@@ -1,7 +1,7 @@
 """Wavelength grid, LED emission spectra and photometric conversions.
 
 All spectra in the project are sampled on :data:`WAVELENGTHS_NM`: 380–720 nm every
-1 nm, the range of the measured camera sensitivities in ``shared/data/camera_ssf`` (a
+1 nm, the range of the measured camera sensitivities in ``camera_models/data/ssf`` (a
 camera with an IR-cut filter sees nothing outside it). A *spectral shape* here is a
 spectrum normalised to unit integral over the grid (unit nm⁻¹): a radiometric quantity
 Q (W, W·sr⁻¹, W·m⁻²·sr⁻¹) with shape s(λ) has spectral density Q·s(λ) per nm.

@@ -26,7 +26,7 @@ import pandas as pd
 
 from pipeline.thesis_tracker import ThesisTrackerSettings, derive_hsv_ranges
 from scenes.render_cache import atomic_write_bytes
-from studies.engine.frame import saved_frame
+from studies.engine.frame import capture_frame
 from studies.engine.report import Report
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
@@ -151,7 +151,7 @@ def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
 
     out = {}
     for colour in ("red", "green", "blue", "yellow"):
-        images = [saved_frame(t)[0] for t in preliminary_tasks if t["scenario"]["side"] == colour]
+        images = [capture_frame(t).image_bgr for t in preliminary_tasks if t["scenario"]["side"] == colour]
         try:
             out[colour] = [[list(lo), list(hi)] for lo, hi in derive_hsv_ranges(images, colour)]
         except ValueError:

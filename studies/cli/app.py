@@ -1,7 +1,7 @@
 """The ``beacon-sim`` command line, assembled in one place.
 
 Each command module (:mod:`studies.cli.hardware`, ``scene``, ``camera``, ``pipeline``,
-``study``, ``experiments``) defines plain functions and a ``COMMANDS`` table; this
+``study``, ``experiments``, ``checks``) defines plain functions and a ``COMMANDS`` table; this
 module registers them on one typer app, in the order ``--help`` lists them. Every
 command that writes results writes JSON beside its pictures. Bad input ends the program
 with one line on stderr naming the field and what was expected (exit code 2).
@@ -17,10 +17,10 @@ from typing import Annotated
 import typer
 from rich.logging import RichHandler
 
-from studies.cli import camera, experiments, hardware, pipeline, scene, study
+from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study
 from studies.cli.common import console
 
-COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments)
+COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks)
 """Where the commands are defined, in the order ``--help`` lists them."""
 
 app = typer.Typer(

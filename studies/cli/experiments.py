@@ -17,13 +17,14 @@ from scenes.render_cache import atomic_write_bytes
 from scenes.view import camera_names
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, prepare_out_dir
+from studies.experiments import bench as b
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
 
 
 def e2e_detection(
-    out: Annotated[Path, typer.Option("--out", help="Output directory (CSV tables, summary.md, config.json).")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume; tables, summary.md).")],
     seeds: Annotated[
         int | None,
         typer.Option("--seeds", help="Sensor-noise seeds per condition, 0..N-1 (default 3; 1 with --quick)."),
@@ -38,22 +39,26 @@ def e2e_detection(
             help="Also detect on one full 18 MP frame (2 m, 15°), compare with the crop (default: not with --quick).",
         ),
     ] = None,
+    workers: opt.Workers = None,
 ) -> None:
     """Issue 5's end-to-end table: T6 + 18 mm captures of the V2 red side, 1-5 m × 0-30°, both trackers × estimators."""
-    n_seeds = seeds if seeds is not None else (1 if quick else 3)
-    if n_seeds < 1:
-        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    from studies.cli.common import rich_progress
+    from studies.engine.sweep import Execution
+
+    if workers is not None and workers < 1:
+        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    options = e2e.default_options(quick, seeds)
+    options.validate()
     prepare_out_dir(out)
-    config = e2e.E2EConfig()
-    console.print(config.describe())
-    ranges, yaws = (e2e.QUICK_e2e.RANGES_M, e2e.QUICK_e2e.YAWS_DEG) if quick else (e2e.RANGES_M, e2e.YAWS_DEG)
-    result = e2e.run_e2e(ranges, yaws, range(n_seeds), config, progress=console.print)
-    if full_frame_check if full_frame_check is not None else not quick:
-        t0 = time.perf_counter()
-        result.full_frame_check = e2e.full_frame_check(config)
-        result.seconds["full_frame_check"] = time.perf_counter() - t0
-    paths = e2e.write_outputs(result, out)
-    console.print(f"wrote {', '.join(str(p) for p in paths.values())} in {result.seconds['total']:.0f} s")
+    console.print(e2e.describe(options))
+    t0 = time.perf_counter()
+    result = e2e.run(
+        out,
+        options,
+        Execution(workers=workers, progress=rich_progress),
+        full_frame=full_frame_check if full_frame_check is not None else not quick,
+    )
+    console.print(f"wrote {', '.join(str(p) for p in result.paths.values())} in {time.perf_counter() - t0:.0f} s")
 
 
 def saturation_table(
@@ -66,21 +71,28 @@ def saturation_table(
         int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")
     ] = 2,
     seed: opt.Seed = 0,
+    workers: opt.Workers = None,
 ) -> None:
     """Marker-core saturation per camera, LED drive (2-20 mA) and diffuser (bare; foam + 0/1/3 sheets) at 2 m and 5 m.
 
     V2 red side, yaw 0, dark, white paper, through render → capture. Writes
     saturation_table.csv (one row per marker) and saturation_table.md (summary,
-    webcam auto-exposure values).
+    webcam auto-exposure values); re-run to resume.
     """
+    from studies.cli.common import rich_progress
+
     cameras = tuple(camera) if camera else saturation.CAMERAS
     for name in cameras:
         if name not in camera_names():
             raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
     if seed < 0:
         raise UsageError(f"seed: expected an integer >= 0, got {seed}")
+    if workers is not None and workers < 1:
+        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
     prepare_out_dir(out)
-    rows = saturation.saturation_rows(cameras, spp=spp, oversampling=oversampling, seed=seed, progress=console.print)
+    rows = saturation.saturation_rows(
+        out, cameras, spp=spp, oversampling=oversampling, seed=seed, workers=workers, progress=rich_progress
+    )
     saturation.write_csv(rows, out / "saturation_table.csv")
     (out / "saturation_table.md").write_text(saturation.summary_markdown(rows), encoding="utf-8")
     console.print(f"wrote {out}/saturation_table.csv ({len(rows)} rows) and saturation_table.md")

@@ -6,13 +6,18 @@ worker process or a Dask cluster):
 ``scenario``   keyword arguments of :class:`scenes.scenario.Scenario` (without ``render``)
 ``render``     keyword arguments of :class:`scenes.scenario.RenderSettings`
 ``seed``       sensor-noise seed
-``exposure``   optional manual settings ``{"iso": .., "exposure_s": ..}`` (else the camera's)
+``exposure``   optional manual settings ``{"iso": .., "exposure_s": .., "f_number": ..}`` (else the camera's)
 ``trackers``, ``estimators``  which detectors to run (default both of each)
 ``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
 ``tags``       optional fields copied into every row (e.g. the test's name)
 ``full_frame`` capture and detect on the whole frame instead of the rendered crop
+``align_px``   optional: pad the rendered crop with zero radiance so its origin and size are
+               multiples of this (JPEG blocks and the study's 50 % resize then group the
+               pixels as in the full frame)
 
-:func:`simulate_frame` returns one row per tracker × estimator with the task's
+:func:`capture_frame` is the one render → capture path: it returns what the camera saved
+(:class:`CapturedFrame`), which experiments measure directly (e.g. core saturation).
+:func:`simulate_frame` scores it: one row per tracker × estimator with the task's
 parameters, the camera's exposure, ground truth, detection and pose results, and the
 marker measurements that do not depend on the detector (core saturation, colour).
 """
@@ -22,13 +27,15 @@ from __future__ import annotations
 import json
 import math
 import resource
+from dataclasses import dataclass, replace
 
 import colour
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
-from camera_models.camera import load_camera
-from camera_models.capture import capture, marker_core_saturation, marker_pixels
+from camera_models.camera import Camera, load_camera
+from camera_models.capture import Capture, capture, marker_core_saturation, marker_pixels
 from camera_models.exposure import manual_exposure
 from pipeline.angles import Intrinsics
 from pipeline.detect import ESTIMATORS, TRACKERS
@@ -36,6 +43,7 @@ from pipeline.evaluate import evaluate_detection
 from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.background import render_background
 from scenes.render import render, with_led_current
+from scenes.radiance import SpectralRadiance
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
@@ -49,14 +57,55 @@ def frame_scenario(task: dict):
     return Scenario(**task["scenario"], render=RenderSettings(**task.get("render", {})))
 
 
+@dataclass(frozen=True)
+class CapturedFrame:
+    """What the camera saved for a frame task, with what produced it.
+
+    Attributes
+    ----------
+    scenario, camera
+        The task's scenario and camera model.
+    capture
+        The capture (raw mosaic, exposure, saved JPEG; crop origin ``x0``, ``y0``).
+    image_bgr
+        The saved JPEG decoded (uint8 BGR): the crop, or the full frame for ``full_frame`` tasks.
+    """
+
+    scenario: Scenario
+    camera: Camera
+    capture: Capture
+    image_bgr: NDArray[np.uint8]
+
+    @property
+    def origin(self) -> tuple[int, int]:
+        """Full-frame pixel of the image's top-left pixel."""
+        return self.capture.x0, self.capture.y0
+
+
+def capture_frame(task: dict) -> CapturedFrame:
+    """Render (or reuse the render of) a frame task and capture it with its camera."""
+    scenario, camera, radiance, background = frame_inputs(task)
+    settings = task.get("exposure") or {}
+    exposure = None
+    if settings.get("iso") is not None or settings.get("exposure_s") is not None:
+        exposure = manual_exposure(camera, settings.get("exposure_s"), settings.get("iso"))
+    cap = capture(
+        radiance,
+        camera,
+        int(task["seed"]),
+        background,
+        exposure,
+        f_number=settings.get("f_number"),
+        full=bool(task.get("full_frame")),
+    )
+    image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    return CapturedFrame(scenario, camera, cap, image_bgr)
+
+
 def simulate_frame(task: dict) -> list[dict]:
     """Simulate one frame task (see module docstring) and score every detector on it."""
-    scenario, camera, radiance, background = frame_inputs(task)
-    exposure = None
-    if task.get("exposure"):
-        exposure = manual_exposure(camera, task["exposure"].get("exposure_s"), task["exposure"].get("iso"))
-    cap = capture(radiance, camera, int(task["seed"]), background, exposure, full=bool(task.get("full_frame")))
-    image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    frame = capture_frame(task)
+    scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
     truth_uv = marker_pixels(camera, scenario)
     truth = {
         "markers_px": truth_uv.tolist(),
@@ -209,7 +258,26 @@ def frame_inputs(task: dict):
     while len(_RENDERS) > 4:
         _RENDERS.pop(next(iter(_RENDERS)))
     radiance, background = (None if r is None else with_led_current(r, scenario.current_mA) for r in held)
+    if task.get("align_px"):
+        radiance = aligned_radiance(radiance, int(task["align_px"]))
     return scenario, camera, radiance, background
+
+
+def aligned_radiance(radiance: SpectralRadiance, align: int) -> SpectralRadiance:
+    """``radiance`` padded with zero radiance so the crop's origin and size are multiples of ``align``
+    (within the frame). The dark surroundings return ~1e-6 of the LED radiance, so the
+    padded crop's pixels equal the full frame's apart from the noise realisation."""
+    g = radiance.grid
+    x0, y0 = (g.x0 // align) * align, (g.y0 // align) * align
+    x1 = min(g.frame_width_px, -(-(g.x0 + g.width) // align) * align)
+    y1 = min(g.frame_height_px, -(-(g.y0 + g.height) // align) * align)
+    if (x0, y0, x1 - x0, y1 - y0) == (g.x0, g.y0, g.width, g.height):
+        return radiance
+    s = g.oversampling
+    pad = ((s * (g.y0 - y0), s * (y1 - g.y0 - g.height)), (s * (g.x0 - x0), s * (x1 - g.x0 - g.width)))
+    comps = tuple(replace(c, image_W_m2_sr=np.pad(c.image_W_m2_sr, pad)) for c in radiance.components)
+    grid = replace(g, x0=x0, y0=y0, width=x1 - x0, height=y1 - y0)
+    return SpectralRadiance(grid, comps, radiance.scenario, radiance.variant, radiance.from_cache)
 
 
 _RENDERS: dict[str, tuple] = {}
@@ -223,19 +291,12 @@ def render_batch_key(task: dict) -> str:
     return json.dumps([scenario, task.get("render", {}), bool(task.get("full_frame"))], sort_keys=True)
 
 
-def saved_frame(task: dict):
-    """The image the camera saves for a task (decoded JPEG, BGR) and its frame origin."""
-    _, camera, radiance, background = frame_inputs(task)
-    cap = capture(radiance, camera, int(task["seed"]), background, full=False)
-    return cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR), (cap.x0, cap.y0)
-
-
 def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:
     """The saved image around the target (±``half_width_m`` at the marker plane), scaled
     to ``size_px`` with nearest-neighbour so camera pixels stay visible; PNG bytes."""
-    scenario, camera, _, _ = frame_inputs(task)
-    image, (x0, y0) = saved_frame(task)
-    u, v = marker_pixels(camera, scenario)[0] - np.array([x0, y0])
+    frame = capture_frame(task)
+    image, camera, scenario = frame.image_bgr, frame.camera, frame.scenario
+    u, v = marker_pixels(camera, scenario)[0] - np.array(frame.origin)
     half = max(2, round(half_width_m * camera.geometry.focal_length_px / scenario.range_m))
     padded = cv2.copyMakeBorder(image, half, half, half, half, cv2.BORDER_CONSTANT, value=(0, 0, 0))
     cu, cv_ = round(u) + half, round(v) + half

@@ -70,7 +70,7 @@ def sweep_in_chunks(
     out: Path,
     estimators: Sequence[str] | None = None,
     execution: Execution = Execution(),
-    frames: Callable[..., list[dict]] = run_frames,
+    frames: Callable[..., list[dict]] | None = None,
 ) -> pd.DataFrame:
     """:func:`sweep` for grids too large to hold as row dicts (millions of frames).
 
@@ -80,7 +80,7 @@ def sweep_in_chunks(
     (about 4 kB per row as dicts, about 0.5 kB as columns). A finished chunk's table is
     stored under ``out/chunks`` keyed by the content of its tasks, so a re-run whose
     results are all stored reads 1 file per chunk instead of one per frame. ``frames``
-    runs a chunk's tasks (signature of :func:`run_frames`; the benchmark passes stand-ins).
+    runs a chunk's tasks (default :func:`run_frames`; the benchmark passes stand-ins).
     """
     parts = []
     for i, conditions in enumerate(chunks):
@@ -89,7 +89,7 @@ def sweep_in_chunks(
         if path.is_file():
             parts.append(pd.read_parquet(path))
             continue
-        rows = frames(tasks, out, execution, description=f"{name} {i + 1}/{len(chunks)}")
+        rows = (frames or run_frames)(tasks, out, execution, description=f"{name} {i + 1}/{len(chunks)}")
         part = pd.DataFrame(rows)
         del rows
         for column in part.select_dtypes(include=["object", "str"]).columns:

@@ -32,14 +32,13 @@ from numpy.typing import NDArray
 
 from camera_models.camera import Camera, load_camera
 from camera_models.optics import RadialMapping, optical_image
+from pipeline.calibration import PATTERN_INNER_CORNERS, SQUARE_M, board_points_m, calibrate_points, find_corners
 from scenes import spectra
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 from scenes.view import CameraGeometry
 
-SQUARE_M = 0.0244
-"""Board square size, m (docs/source-study.md §10)."""
-INNER = (8, 6)
-"""Inner corners (columns, rows): OpenCV's pattern size for the study's 6 × 8 board."""
+INNER = PATTERN_INNER_CORNERS
+"""The study's board (docs/source-study.md §10): 8 × 6 inner corners (OpenCV's pattern size), 24.4 mm squares."""
 WHITE, BLACK = 1.0, 0.05
 """Relative radiance of the white and black squares (and of the background: black)."""
 
@@ -53,13 +52,6 @@ def scaled_camera(name: str, k: int) -> Camera:
     )
     lens = dataclasses.replace(cam.lens, blur_sigma_um=cam.lens.blur_sigma_um * k)
     return dataclasses.replace(cam, geometry=geom, lens=lens)
-
-
-def object_points() -> NDArray[np.float32]:
-    """Board-frame positions (x, y, 0) of the inner corners in OpenCV's row-major order, m."""
-    objp = np.zeros((INNER[0] * INNER[1], 3), np.float32)
-    objp[:, :2] = np.mgrid[0 : INNER[0], 0 : INNER[1]].T.reshape(-1, 2) * SQUARE_M
-    return objp
 
 
 def project_true(camera: Camera, rvec, tvec, points_b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -249,21 +241,8 @@ def board_image(camera: Camera, rvec, tvec, oversampling: int = 2) -> NDArray[np
     return np.clip(250.0 * frame / np.percentile(crop, 99.5), 0, 255).astype(np.uint8)
 
 
-def find_corners(image: NDArray[np.uint8]) -> NDArray[np.float32] | None:
-    """Inner corners (48, 1, 2) in OpenCV's order, or None: ``findChessboardCorners`` + ``cornerSubPix``.
-
-    (``findChessboardCornersSB`` finds boards as reliably here but its corners are ~6× less
-    accurate on these images: 0.15 px RMS against 0.025 px.)
-    """
-    found, corners = cv2.findChessboardCorners(image, INNER, flags=cv2.CALIB_CB_ADAPTIVE_THRESH)
-    if not found:
-        return None
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-    return cv2.cornerSubPix(image, corners, (5, 5), (-1, -1), crit)
-
-
 @dataclass(frozen=True)
-class Calibration:
+class LensCalibration:
     """What OpenCV recovered, and how it compares with the lens model.
 
     Attributes
@@ -323,57 +302,35 @@ def projection_curves(camera: Camera, K, D, fisheye: bool, r_max_px: float, n: i
     return theta, r_true, r_cv
 
 
-CV_MODELS = {
-    "standard": 0,  # k1, k2, p1, p2, k3: calibrateCamera's default (the study's)
-    "rational": cv2.CALIB_RATIONAL_MODEL,  # + k4, k5, k6 (radial ratio of sixth-order polynomials)
-}
-
-
-def calibrate(camera: Camera, model: str = "rational", oversampling: int = 2, poses=None) -> Calibration:
+def calibrate(camera: Camera, model: str = "rational", oversampling: int = 2, poses=None) -> LensCalibration:
     """Render the board in every pose, find it, calibrate with OpenCV and compare with the lens model.
 
     ``model`` is ``standard`` or ``rational`` (``cv2.calibrateCamera``) or ``fisheye``
     (``cv2.fisheye.calibrate``, 4 coefficients of θ_d = θ(1 + k1θ² + … + k4θ⁸)).
     """
-    if model not in (*CV_MODELS, "fisheye"):
-        raise ValueError(f"model: expected standard, rational or fisheye, got {model!r}")
     g = camera.geometry
     poses = board_poses(camera) if poses is None else poses
-    objp = object_points()
+    objp = board_points_m(INNER, SQUARE_M)
     obj_pts, img_pts = [], []
     for rvec, tvec in poses:
-        corners = find_corners(board_image(camera, rvec, tvec, oversampling))
+        corners = find_corners(board_image(camera, rvec, tvec, oversampling), INNER)
         if corners is not None:
             obj_pts.append(objp)
             img_pts.append(corners)
     if len(obj_pts) < 5:
         raise RuntimeError(f"{camera.name}: board found in only {len(obj_pts)} of {len(poses)} views")
-    size = (g.width_px, g.height_px)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 200, 1e-12)
-    if model == "fisheye":
-        rms, K, D, _, _ = cv2.fisheye.calibrate(
-            # OpenCV 5.0's fisheye.calibrate accepts only (1, N, C) float32 point sets
-            [o.reshape(1, -1, 3).astype(np.float32) for o in obj_pts],
-            [c.reshape(1, -1, 2).astype(np.float32) for c in img_pts],
-            size,
-            np.eye(3),
-            np.zeros((4, 1)),
-            flags=cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW,  # OpenCV 5: shared calib flags
-            criteria=crit,
-        )
-    else:
-        rms, K, D, _, _ = cv2.calibrateCamera(obj_pts, img_pts, size, None, None, flags=CV_MODELS[model], criteria=crit)
+    rms, K, D = calibrate_points(obj_pts, img_pts, (g.width_px, g.height_px), model)
     cx, cy = g.principal_point_px
     pts = np.concatenate(img_pts).reshape(-1, 2)
     covered = float(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy).max())
     _, r_true, r_cv = projection_curves(camera, K, D, model == "fisheye", covered)
     diff = r_cv - r_true
-    return Calibration(
+    return LensCalibration(
         camera=camera.name,
         model=model,
         views=len(obj_pts),
         views_tried=len(poses),
-        rms_px=float(rms),
+        rms_px=rms,
         K=K,
         D=np.ravel(D),
         focal_error=float(0.5 * (K[0, 0] + K[1, 1]) / g.focal_length_px - 1.0),

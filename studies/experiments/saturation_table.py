@@ -1,41 +1,54 @@
 """Issue 4: saturated fraction of each marker's core per camera, LED drive and paper count, at 2 m and 5 m.
 
-Every case goes through the real pipeline: Mitsuba render of the V2 beacon's red side
-(yaw 0, dark environment, black housing, white paper) → :func:`camera_models.capture.capture`
-(lens, exposure, sensor with noise, ISP) → :func:`camera_models.capture.marker_core_saturation`
-on the raw mosaic. The webcams meter the whole frame (low-resolution background render)
-and run their auto-exposure loop; the T6 uses the study's manual ISO 6400, 1/60 s.
+Every case is a frame task of :mod:`studies.engine.tasks` through the engine's one
+render → capture path (:func:`studies.engine.frame.capture_frame`: Mitsuba render of the
+V2 beacon's red side, yaw 0, dark environment, black housing, white paper → lens,
+exposure, sensor with noise, ISP), measured by
+:func:`camera_models.capture.marker_core_saturation` on the raw mosaic
+(:func:`saturation_rows_of`). The webcams meter the whole frame (low-resolution
+background render) and run their auto-exposure loop; the T6 uses its camera file's
+manual exposure (the study's ISO 6400, 1/60 s).
 
 Diffusers: the bare LED (no foam, no paper) and foam with 0, 1 or 3 sheets of white paper.
-LED drive does not change the render (it scales the cached unit render), so each
-(camera, range, diffuser) is rendered once; near-field marker renders are cached per
-diffuser configuration. Render settings are modest (4 spp, 2× oversampling, only the
-facing target); the capture is of the crop only (the full frame adds nothing to the
-markers' pixels: metering uses the background render either way).
+LED drive does not change the render (it scales the cached unit render), so the drives
+of each (camera, range, diffuser) are one render batch; near-field marker renders are
+cached per diffuser configuration. Render settings are modest (4 spp, 2× oversampling,
+only the facing target); the capture is of the crop only (the full frame adds nothing
+to the markers' pixels: metering uses the background render either way). Tasks run
+through :func:`studies.engine.runner.run_tasks` (resumable: rows stored under
+``out/tasks``).
+
+Rows (:data:`FIELDS`), one per camera × range (m) × diffuser × drive (mA) × marker: the
+core's radius (px) and pixel count, its saturated fraction (0–1) in all and per colour
+filter site (R, G, B), the peak and clip levels (DN), the exposure (mode, time in s,
+ISO, gain code, analog gain), the auto exposure's last metered mean (fraction of clip)
+and whether it settled (:func:`ae_settled`), and the seed.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from camera_models.camera import load_camera
-from camera_models.capture import capture, marker_core_saturation
-from scenes.background import render_background
-from scenes.render import render
-from scenes.render_cache import RenderCache
-from scenes.scenario import RenderSettings, Scenario
+from camera_models.capture import marker_core_saturation
+from studies.engine.frame import FRAME_VERSION, capture_frame, render_batch_key
+from studies.engine.runner import Progress, no_progress, run_tasks
+from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
 
 CAMERAS = ("canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920")
 RANGES_M = (2.0, 5.0)
 DRIVES_MA = (2.0, 5.0, 10.0, 20.0)
 DIFFUSERS = ((False, 0), (True, 0), (True, 1), (True, 3))
 """(foam, paper sheets): the bare LED row, then foam with 0, 1 and 3 sheets."""
+ORDER = ("beacon", "side", "environment", "yaw_deg", "camera", "range_m", "diffuser", "led_current_mA")
+"""Grid loop order (first outermost): camera, range, diffuser, drive."""
+ROWS_VERSION = 1
+"""Bump when :func:`saturation_rows_of` changes its rows (with the engine's FRAME_VERSION: the stored rows' version)."""
 
 FIELDS = (
     "camera",
@@ -80,7 +93,7 @@ def ae_settled(history: Sequence[tuple[float, int, float]], tolerance: float = 0
     return all(abs(t / t0 - 1.0) <= tolerance and g == g0 for t, g, _ in last)
 
 
-def saturation_rows(
+def saturation_tasks(
     cameras: Sequence[str] = CAMERAS,
     ranges_m: Sequence[float] = RANGES_M,
     drives_mA: Sequence[float] = DRIVES_MA,
@@ -88,71 +101,83 @@ def saturation_rows(
     spp: int = 4,
     oversampling: int = 2,
     seed: int = 0,
-    cache=None,
-    progress: Callable[[str], None] | None = None,
 ) -> list[dict]:
-    """One row per (camera, range, diffuser, drive, marker); see :data:`FIELDS`."""
+    """Frame tasks of every camera × range (m) × diffuser × drive (mA), in that loop order:
+    V2 red side, yaw 0, dark, white paper, no pose jitter; ``seed`` seeds the render and the
+    sensor noise. Raises ValueError (one line) for an unknown camera or impossible drive."""
+    options = StudyOptions(
+        cameras=tuple(cameras),
+        ranges_m=tuple(float(r) for r in ranges_m),
+        yaws_deg=(0.0,),
+        currents_mA=tuple(float(d) for d in drives_mA),
+        diffusers=tuple((bool(foam), int(sheets), "white") for foam, sheets in diffusers),
+        seeds=1,
+        jitter_poses=1,
+        render={"spp": spp, "oversampling": oversampling, "crop": "target", "seed": seed},
+    )
+    options.validate()
+    return [{**t, "seed": seed} for t in frame_tasks(grid_conditions(options, ORDER), options)]
 
-    cache = RenderCache() if cache is None else cache
-    settings = RenderSettings(spp=spp, oversampling=oversampling, seed=seed, crop="target")
-    rows = []
-    for name in cameras:
-        cam = load_camera(name)
-        clip = min(cam.sensor.white_level_DN, 2**cam.sensor.adc_bits - 1)
-        for range_m in ranges_m:
-            for foam, sheets in diffusers:
-                for drive in drives_mA:
-                    t0 = time.perf_counter()
-                    scenario = Scenario(
-                        beacon="v2",
-                        side="red",
-                        range_m=float(range_m),
-                        yaw_deg=0.0,
-                        camera=name,
-                        environment="dark",
-                        led_current_mA=float(drive),
-                        foam=foam,
-                        paper_sheets=sheets,
-                        paper_colour="white",
-                        render=settings,
-                    )
-                    radiance = render(scenario, cache)
-                    background = render_background(scenario, cache)
-                    cap = capture(radiance, cam, seed, background=background, full=False)
-                    e = cap.exposure
-                    for m in marker_core_saturation(cap, cam, scenario):
-                        rows.append(
-                            {
-                                "camera": name,
-                                "range_m": float(range_m),
-                                "foam": foam,
-                                "paper_sheets": sheets,
-                                "led_current_mA": float(drive),
-                                "marker": m["id"],
-                                "core_radius_px": round(m["core_radius_px"], 3),
-                                "core_pixels": m["core_pixels"],
-                                "saturated_fraction": round(m["saturated_fraction"], 4),
-                                **{f"saturated_fraction_{c}": round(m["saturated_fraction_cfa"][c], 4) for c in "RGB"},
-                                "peak_DN": _peak_dn(cap, m["u"], m["v"], m["core_radius_px"]),
-                                "clip_DN": int(clip),
-                                "exposure_mode": e.mode,
-                                "exposure_s": e.exposure_s,
-                                "iso": e.iso,
-                                "gain_code": e.gain_code,
-                                "analog_gain": round(e.analog_gain, 4),
-                                "ae_metered_mean": round(e.history[-1][2], 5) if e.history else None,
-                                "ae_settled": ae_settled(e.history) if e.history else None,
-                                "seed": seed,
-                            }
-                        )
-                    if progress is not None:
-                        sat = np.mean([r["saturated_fraction"] for r in rows[-5:]])
-                        progress(
-                            f"{name} {range_m:g} m foam={foam} sheets={sheets} {drive:g} mA: "
-                            f"mean core saturation {sat:.3f}, t={e.exposure_s:.4g} s gain x{e.analog_gain:.3g} "
-                            f"({time.perf_counter() - t0:.1f} s)"
-                        )
-    return rows
+
+def saturation_rows_of(task: dict) -> list[dict]:
+    """The :data:`FIELDS` rows (one per marker) of one frame task: captured by the engine, measured on the raw."""
+    frame = capture_frame(task)
+    cap, cam, scenario = frame.capture, frame.camera, frame.scenario
+    clip = min(cam.sensor.white_level_DN, 2**cam.sensor.adc_bits - 1)
+    e = cap.exposure
+    return [
+        {
+            "camera": scenario.camera,
+            "range_m": float(scenario.range_m),
+            "foam": bool(scenario.foam),
+            "paper_sheets": int(scenario.paper_sheets),
+            "led_current_mA": float(scenario.led_current_mA),
+            "marker": m["id"],
+            "core_radius_px": round(m["core_radius_px"], 3),
+            "core_pixels": m["core_pixels"],
+            "saturated_fraction": round(m["saturated_fraction"], 4),
+            **{f"saturated_fraction_{c}": round(m["saturated_fraction_cfa"][c], 4) for c in "RGB"},
+            "peak_DN": _peak_dn(cap, m["u"], m["v"], m["core_radius_px"]),
+            "clip_DN": int(clip),
+            "exposure_mode": e.mode,
+            "exposure_s": float(e.exposure_s),
+            "iso": None if e.iso is None else float(e.iso),
+            "gain_code": None if e.gain_code is None else int(e.gain_code),
+            "analog_gain": round(float(e.analog_gain), 4),
+            "ae_metered_mean": round(float(e.history[-1][2]), 5) if e.history else None,
+            "ae_settled": ae_settled(e.history) if e.history else None,
+            "seed": int(task["seed"]),
+        }
+        for m in marker_core_saturation(cap, cam, scenario)
+    ]
+
+
+def saturation_rows(
+    out: Path,
+    cameras: Sequence[str] = CAMERAS,
+    ranges_m: Sequence[float] = RANGES_M,
+    drives_mA: Sequence[float] = DRIVES_MA,
+    diffusers: Sequence[tuple[bool, int]] = DIFFUSERS,
+    spp: int = 4,
+    oversampling: int = 2,
+    seed: int = 0,
+    workers: int | None = None,
+    progress: Progress = no_progress,
+) -> list[dict]:
+    """One row per (camera, range, diffuser, drive, marker) (:data:`FIELDS`), in that order;
+    tasks stored under ``out/tasks``, a re-run resumes. ``workers``: local processes
+    (default one per CPU)."""
+    tasks = saturation_tasks(cameras, ranges_m, drives_mA, diffusers, spp, oversampling, seed)
+    return run_tasks(
+        tasks,
+        out,
+        saturation_rows_of,
+        version=100 * FRAME_VERSION + ROWS_VERSION,
+        workers=workers,
+        description="saturation-table",
+        progress=progress,
+        batch_key=render_batch_key,
+    )
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
@@ -214,7 +239,6 @@ def summary_markdown(rows: list[dict]) -> str:
             lines.append("")
     auto = [r for r in rows if r["exposure_mode"] == "auto" and r["marker"] == 1]
     if auto:
-
         lines += [
             "## Webcam auto exposure (settled values)",
             "",

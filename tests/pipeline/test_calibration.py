@@ -140,6 +140,7 @@ def test_too_few_views_and_bad_files(tmp_path):
 
 def test_detect_with_a_calibration_undoes_lens_distortion():
     """Markers drawn where a distorting lens puts them: with the calibration the pose is right."""
+    from pipeline.angles import Intrinsics
     from pipeline.detect import detect
     from pipeline.frames import pose_from_scenario
     from scenes.scenario import Scenario
@@ -162,11 +163,11 @@ def test_detect_with_a_calibration_undoes_lens_distortion():
     assert uv[:, 0].max() > 1000 and uv[:, 1].min() < 200  # far off-centre, where distortion is large
     img = draw_markers((g.height_px, g.width_px), uv, (0.03, 0.06, 1.0), 1.5, peak=0.9)
     for alpha in (0.0, 1.0):
-        out = detect(img, camera, calibration=cal, alpha=alpha).to_dict()
+        out = detect(img, Intrinsics.from_geometry(g), calibration=cal, alpha=alpha).to_dict()
         assert out["side"] == "red", out["reason"]
         got = np.array([[m["u"], m["v"]] for m in out["markers"]])
         assert np.abs(got - uv).max() < 0.15  # reported in the original (distorted) image
         assert abs(out["range_m"] - 2.0) < 0.004
-    plain = detect(img, camera).to_dict()
+    plain = detect(img, Intrinsics.from_geometry(g)).to_dict()
     print(f"\nrange error with calibration {out['range_m'] - 2.0:+.5f} m, without {plain['range_m'] - 2.0:+.5f} m")
     assert abs(plain["range_m"] - 2.0) > 5 * abs(out["range_m"] - 2.0)

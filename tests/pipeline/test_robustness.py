@@ -8,10 +8,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from pipeline.angles import Intrinsics
 from pipeline.detect import detect
+from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, load_image
+from scenes.led import SIDE_COLOURS
+from scenes.view import camera_geometry
 
-CAMERA = "logitech-c270"  # 1280 × 720
+CAMERA = Intrinsics.from_geometry(camera_geometry("logitech-c270"))  # 1280 × 720
 
 
 def _check_no_crash(image, **kwargs):
@@ -78,7 +82,7 @@ def test_full_frame_noise_and_huge_images():
     out = detect(huge, CAMERA).to_dict()
     assert out["side"] is None and "too large" in out["reason"]
     big = np.zeros((3456, 5184, 3), np.uint16)  # the T6 frame, 16 bit, dark
-    out = detect(big, "canon-t6-18mm").to_dict()
+    out = detect(big, Intrinsics.from_geometry(camera_geometry("canon-t6-18mm"))).to_dict()
     assert out["side"] is None and out["reason"].startswith("no bright blobs")
 
 
@@ -100,8 +104,9 @@ def test_bad_arguments_name_the_field(arg):
     field = next(iter(arg))
     with pytest.raises(ValueError, match=rf"^{field}:"):
         detect(np.zeros((720, 1280, 3), np.uint8), CAMERA, calibration=cal, **arg)
-    with pytest.raises(ValueError, match=r"^camera:"):
-        detect(np.zeros((4, 4)), "no-such-camera")
+    small = Calibration(np.diag([500.0, 500.0, 1.0]), np.zeros(5), 640, 480, 0.1, 10)
+    with pytest.raises(ValueError, match=r"^calibration: made for 640×480 px, the frame is 1280×720 px"):
+        detect(np.zeros((720, 1280, 3), np.uint8), CAMERA, calibration=small)
 
 
 @pytest.mark.parametrize(
@@ -116,3 +121,14 @@ def test_bad_files_give_one_line_image_errors(tmp_path, name, content):
     assert str(exc.value).startswith("image: ") and "\n" not in str(exc.value)
     with pytest.raises(ValueError, match=r"^image: no such file"):
         load_image(tmp_path / "missing.png")
+
+
+def test_failures_carry_a_code_beside_the_message():
+    """What went wrong is a code a program can act on, not only a sentence."""
+    dark = np.zeros((720, 1280, 3), np.uint8)
+    best = detect(dark, CAMERA, tracker="best")
+    assert best.failure is Failure.NO_BLOBS and best.reason.startswith("no bright blobs")
+    study = detect(dark, CAMERA, tracker="thesis")
+    assert study.failure is Failure.NO_COLOUR_WITH_FIVE and study.blob_counts == dict.fromkeys(SIDE_COLOURS, 0)
+    outside = detect(dark[:10, :10], CAMERA, crop_origin_px=(1275, 0))
+    assert outside.failure is Failure.IMAGE and outside.to_dict()["failure"] == "image"

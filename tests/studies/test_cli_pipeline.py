@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from pipeline.angles import Intrinsics
 from pipeline.calibration import Calibration
 from pipeline.evaluate import evaluate_detection
 from scenes.view import camera_geometry
@@ -114,7 +115,7 @@ def test_detect_16bit_tiff_with_the_study_chain(run, tmp_path):
     [
         ("bad.jpg", b"not a jpeg", CAMERA, "beacon-sim: error: image: cannot decode bad.jpg"),
         ("IMG_0001.CR2", b"not a raw file", CAMERA, "beacon-sim: error: image: cannot read camera raw IMG_0001.CR2"),
-        ("ok.png", None, "canon-t6-18mm", "beacon-sim: error: image: 1280×720 px is not canon-t6-18mm's"),
+        ("ok.png", None, "canon-t6-18mm", "beacon-sim: error: image: 1280×720 px is not the camera's 5184×3456 px"),
         ("ok.png", None, "nikon", "beacon-sim: error: camera:"),
     ],
 )
@@ -161,7 +162,7 @@ def test_calibrate_command_errors_and_output(run, tmp_path):
 def test_evaluate_detection_scores_a_known_frame():
     img, uv = _frame(range_m=3.0, yaw=-8.0, colour=(1.0, 0.3, 0.02), size=1.2, peak=0.8)
     truth = {"markers_px": uv.tolist(), "range_m": 3.0, "yaw_deg": -8.0, "side": "blue"}
-    res = evaluate_detection(img, CAMERA, truth)
+    res = evaluate_detection(img, Intrinsics.from_geometry(camera_geometry(CAMERA)), truth)
     assert res["detected"] and res["side_correct"] and res["numbering_correct"]
     assert res["centroid_rms_px"] < 0.1 and abs(res["range_error_m"]) < 0.01 and abs(res["yaw_error_deg"]) < 0.5
     # render.json form, and a truth whose markers 2 and 3 are swapped: numbering is then wrong
@@ -169,7 +170,7 @@ def test_evaluate_detection_scores_a_known_frame():
         "scenario": {"range_m": 3.0, "yaw_deg": -8.0, "side": "red"},
         "markers_ground_truth_px": [{"id": i + 1, "u": u, "v": v} for i, (u, v) in enumerate(uv[[0, 2, 1, 3, 4]])],
     }
-    res = evaluate_detection(img, CAMERA, render_json, tracker="thesis")
+    res = evaluate_detection(img, Intrinsics.from_geometry(camera_geometry(CAMERA)), render_json, tracker="thesis")
     assert res["detected"] is False and res["numbering_correct"] is False and res["reason"]
-    res = evaluate_detection(img, CAMERA, render_json)
+    res = evaluate_detection(img, Intrinsics.from_geometry(camera_geometry(CAMERA)), render_json)
     assert res["numbering_correct"] is False and res["side_correct"] is False

@@ -23,11 +23,11 @@ import cv2
 import numpy as np
 import pytest
 
+from pipeline.calibration import CV_MODELS, SQUARE_M, board_points_m
 from studies.experiments.lens_calibration import (
-    CV_MODELS,
+    INNER,
     board_poses,
     calibrate,
-    object_points,
     project_true,
     scaled_camera,
 )
@@ -62,7 +62,7 @@ def test_poses_keep_the_board_inside_the_frame_and_reach_the_corners():
     for name, k, _ in CASES:
         cam = scaled_camera(name, k)
         g = cam.geometry
-        uv = np.concatenate([project_true(cam, r, t, object_points().astype(float)) for r, t in board_poses(cam)])
+        uv = np.concatenate([project_true(cam, r, t, board_points_m(INNER, SQUARE_M).astype(float)) for r, t in board_poses(cam)])
         assert np.all(np.isfinite(uv))
         assert uv[:, 0].min() > 0 and uv[:, 1].min() > 0
         assert uv[:, 0].max() < g.width_px - 1 and uv[:, 1].max() < g.height_px - 1
@@ -76,7 +76,7 @@ def test_poses_keep_the_board_inside_the_frame_and_reach_the_corners():
 def _exact_corner_focal_error(name: str, k: int, model: str) -> float:
     cam = scaled_camera(name, k)
     g = cam.geometry
-    objp = object_points()
+    objp = board_points_m(INNER, SQUARE_M)
     img = [
         project_true(cam, r, t, objp.astype(float)).astype(np.float32).reshape(-1, 1, 2) for r, t in board_poses(cam)
     ]

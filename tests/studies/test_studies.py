@@ -175,10 +175,11 @@ def _fake_rows(tasks):
 
 def test_chunked_sweep_equals_one_sweep_and_rereads_only_chunk_tables(tmp_path, monkeypatch):
     from studies.engine import sweep as common
+    from studies.engine import tables
 
     o = replication.default_options(True).with_overrides(ranges_m=(2.0, 5.0, 9.0), seeds=3)
     calls = []
-    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: calls.append(len(tasks)) or _fake_rows(tasks))
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, *args, **kw: calls.append(len(tasks)) or _fake_rows(tasks))
     whole = common.sweep("x", replication.conditions(o), o, tmp_path / "whole")
     chunked = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
     assert len(replication.chunks(o)) == 4 and sum(calls[1:]) == calls[0] == len(whole) // 2
@@ -190,7 +191,7 @@ def test_chunked_sweep_equals_one_sweep_and_rereads_only_chunk_tables(tmp_path, 
     assert calls == [] and (tmp_path / "chunked" / "results.parquet").read_bytes() == before
     pd.testing.assert_frame_equal(again, chunked, check_exact=True)
     # above CSV_MAX_ROWS only parquet is written, and an older CSV is removed
-    monkeypatch.setattr(common, "CSV_MAX_ROWS", 10)
+    monkeypatch.setattr(tables, "CSV_MAX_ROWS", 10)
     common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
     assert not (tmp_path / "chunked" / "results.csv").exists()
     assert len(pd.read_parquet(tmp_path / "chunked" / "results.parquet")) == len(whole)
@@ -202,7 +203,7 @@ def test_replication_max_range_fits_in_a_pool_equal_the_fits_in_process(tmp_path
     o = replication.default_options(True).with_overrides(
         cameras=("logitech-c270",), diffusers=((True, 1, "matched"),), ranges_m=(2.0, 5.0, 9.0), seeds=3
     )
-    monkeypatch.setattr(common, "run_frames", lambda tasks, out, **kw: _fake_rows(tasks))
+    monkeypatch.setattr(common, "run_frames", lambda tasks, out, *args, **kw: _fake_rows(tasks))
     frame = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path)
     one, two = replication.max_range_table(frame, workers=1), replication.max_range_table(frame, workers=2)
     assert len(one) == 2 and np.all((one.max_range_m > 2) & (one.max_range_m < 9))  # one per drive
