@@ -191,7 +191,9 @@ def thesis_pose_from_vectors(
     ranges = rng.ranges_m[0]
     converged = (bool(rng.converged[0, 0]), bool(rng.converged[0, 1]))
     if not np.all(np.isfinite(ranges)) or ranges[0] <= 0:
-        return ThesisPoseResult(None, None, ranges, converged, "inverse perspective: no finite positive range", Failure.RANGE)
+        return ThesisPoseResult(
+            None, None, ranges, converged, "inverse perspective: no finite positive range", Failure.RANGE
+        )
     q = _attitude(r, ranges, design, weights, full_quest)
     if q is None:
         return ThesisPoseResult(None, None, ranges, converged, "QUEST: no finite attitude", Failure.ATTITUDE)

@@ -351,7 +351,10 @@ def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: lis
             what += f"; blob at ({b.u:.0f}, {b.v:.0f}) is {b.area_px / np.median(areas):.1f}× the median area: merged"
         return Failure.TOO_FEW_BLOBS, what
     rms = fits[colour].rms_px if colour in fits else float("inf")
-    return Failure.NO_FIT, f"{colour}: {n} blobs but no 5 of them fit the target geometry (best reprojection RMS {rms:.2g} px)"
+    return (
+        Failure.NO_FIT,
+        f"{colour}: {n} blobs but no 5 of them fit the target geometry (best reprojection RMS {rms:.2g} px)",
+    )
 
 
 def calibrate_colours(

@@ -25,7 +25,11 @@ def to_world_matrix(rot: np.ndarray, centre: np.ndarray, scale=(1.0, 1.0, 1.0)) 
 
 
 def disk_shape(centre, normal, radius, material, emitter=None) -> dict:
-    shape = {"type": "disk", "matrix": to_world_matrix(frame_with_z(normal), centre, (radius, radius, 1.0)), "material": material}
+    shape = {
+        "type": "disk",
+        "matrix": to_world_matrix(frame_with_z(normal), centre, (radius, radius, 1.0)),
+        "material": material,
+    }
     if emitter is not None:
         shape["emitter"] = emitter
     return shape

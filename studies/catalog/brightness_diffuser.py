@@ -62,14 +62,9 @@ def default_options(quick: bool) -> StudyOptions:
     )
 
 
-def conditions(o: StudyOptions) -> list[dict]:
-    """Nominal conditions of the sweep."""
-    return grid_conditions(o)
-
-
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
-    frame = sweep(NAME, conditions(options), options, out, execution=execution, estimators=["best"])
+    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
     _report(out, options, table, summary)
@@ -79,7 +74,6 @@ def run(out: Path, options: StudyOptions, execution: Execution = Execution()) ->
 
 def configuration_table(frame):
     """One row per camera × side × range × current × diffuser × tracker with the metrics."""
-
 
     keys = ["camera", "side", "nominal_range_m", "led_current_mA", "foam", "paper_sheets", "paper_colour", "tracker"]
     out = []

@@ -46,14 +46,9 @@ def default_options(quick: bool) -> StudyOptions:
     )
 
 
-def conditions(o: StudyOptions) -> list[dict]:
-    """Nominal conditions of the sweep."""
-    return grid_conditions(o)
-
-
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary (``max_range`` records)."""
-    frame = sweep(NAME, conditions(options), options, out, execution=execution, estimators=["best"])
+    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
     records = []
     keys = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]
     for key, g in frame.groupby(keys, sort=True):

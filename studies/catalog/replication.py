@@ -82,9 +82,7 @@ def chunks(o: StudyOptions) -> list[list[dict]]:
 
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
-    frame = sweep_in_chunks(
-        NAME, chunks(options), options, out, execution=execution, estimators=["best"]
-    )
+    frame = sweep_in_chunks(NAME, chunks(options), options, out, execution=execution, estimators=["best"])
     summary = {"study": NAME, "max_range": max_range_table(frame, execution.workers).to_dict("records")}
     configurations = configuration_table(frame)
     atomic_write_bytes(out / "configurations.csv", configurations.to_csv(index=False, float_format="%.6g").encode())
@@ -98,8 +96,6 @@ def max_range_table(frame, workers: int | None = None):
     pooling every side and yaw: the range within which all of them are localised.
     The groups' fits (768 in the full grid, 0.6-15 s each, depending on the outcomes)
     run on ``workers`` processes."""
-
-
 
     keys = list(MAX_RANGE_BY)
     best = frame[frame.tracker == "best"]

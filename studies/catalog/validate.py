@@ -96,9 +96,7 @@ def test_conditions(quick: bool) -> list[tuple[str, dict]]:
     return out
 
 
-def run(
-    out: Path, quick: bool, execution: Execution = Execution(), seeds: int | None = None
-) -> list[dict]:
+def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int | None = None) -> list[dict]:
     """Run every test into ``out``; returns the validation rows.
 
     As the study did, the preliminary test's 150 mm captures set the colour thresholds

@@ -61,14 +61,9 @@ def default_options(quick: bool) -> StudyOptions:
     )
 
 
-def conditions(o: StudyOptions) -> list[dict]:
-    """Nominal conditions of the sweep."""
-    return grid_conditions(o)
-
-
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
-    frame = sweep(NAME, conditions(options), options, out, execution=execution)
+    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution)
     summary = analyse(frame)
     mosaic = mosaic_png(options, out)
     _report(out, options, frame, summary, mosaic)
@@ -161,7 +156,6 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-
     cams = options.cameras
     beacon = "v2" if "v2" in options.beacons else options.beacons[0]  # V1's markers face sideways
     fig, axes = plt.subplots(
@@ -173,7 +167,7 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
     )
     for i, cam in enumerate(cams):
         for j, r in enumerate(MOSAIC_RANGES_M):
-            cond = conditions(
+            cond = grid_conditions(
                 StudyOptions(
                     cameras=(cam,),
                     beacons=(beacon,),

@@ -19,6 +19,7 @@ from camera_models.optics import check_f_number
 from scenes.background import render_background
 from scenes.render import render as render_scenario
 from scenes.render_cache import RenderCache, atomic_write_bytes
+from scenes.scenario import Scenario
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, prepare_out_dir
 
@@ -59,23 +60,10 @@ def emva1288(
     console.print(f"wrote {out}/descriptor.txt and images/ (process with the emva1288 package)")
 
 
+@opt.scenario_command
 def capture(
     out: opt.Out,
-    beacon: opt.Beacon = "v2",
-    side: opt.Side = "red",
-    range_m: opt.RangeM = 5.0,
-    yaw_deg: opt.YawDeg = 10.0,
-    camera: opt.Camera = "canon-t6-18mm",
-    environment: opt.Environment = "dark",
-    led_current_ma: opt.CurrentMA = None,
-    camera_height_m: opt.HeightM = 0.0,
-    housing: opt.Housing = "black",
-    foam: opt.Foam = False,
-    paper_sheets: opt.Sheets = 0,
-    paper_colour: opt.PaperColour = "white",
-    spp: opt.Spp = 16,
-    oversampling: opt.Oversampling = 3,
-    seed: opt.Seed = 0,
+    scenario: Scenario,
     iso: opt.Iso = None,
     gain: opt.Gain = None,
     exposure_s: Annotated[
@@ -85,6 +73,7 @@ def capture(
     no_cache: opt.NoCache = False,
 ) -> None:
     """Simulate what the camera saves: JPEG, raw mosaic (16-bit PNG), full-frame preview and capture.json."""
+    camera, seed = scenario.camera, scenario.render.seed
     cam = load_camera(camera)
     if f_number is not None:
         check_f_number(f_number)
@@ -93,11 +82,6 @@ def capture(
         if cam.exposure.mode == "auto":
             raise UsageError(f"exposure_s: {camera} exposes automatically; its exposure cannot be set")
         exposure = manual_exposure(cam, exposure_s, iso, gain)
-    scenario = opt.scenario_from(
-        beacon=beacon, side=side, range_m=range_m, yaw_deg=yaw_deg, camera=camera, environment=environment,
-        led_current_ma=led_current_ma, camera_height_m=camera_height_m, housing=housing, foam=foam,
-        paper_sheets=paper_sheets, paper_colour=paper_colour, spp=spp, oversampling=oversampling, seed=seed,
-    )  # fmt: skip
     prepare_out_dir(out)
     cache = None if no_cache else RenderCache()
     t0 = time.perf_counter()

@@ -3,6 +3,11 @@ scenario they describe."""
 
 from __future__ import annotations
 
+import functools
+import inspect
+import typing
+from collections.abc import Callable
+from inspect import Parameter
 from pathlib import Path
 from typing import Annotated
 
@@ -39,6 +44,26 @@ Scheduler = Annotated[str | None, typer.Option("--scheduler", help="Dask schedul
 Seeds = Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.")]
 
 
+SCENARIO_OPTIONS = (
+    ("beacon", Beacon, "v2"),
+    ("side", Side, "red"),
+    ("range_m", RangeM, 5.0),
+    ("yaw_deg", YawDeg, 10.0),
+    ("camera", Camera, "canon-t6-18mm"),
+    ("environment", Environment, "dark"),
+    ("led_current_ma", CurrentMA, None),
+    ("camera_height_m", HeightM, 0.0),
+    ("housing", Housing, "black"),
+    ("foam", Foam, False),
+    ("paper_sheets", Sheets, 0),
+    ("paper_colour", PaperColour, "white"),
+    ("spp", Spp, 16),
+    ("oversampling", Oversampling, 3),
+    ("seed", Seed, 0),
+)
+"""The options that describe a scenario: (parameter, option, default)."""
+
+
 def scenario_from(
     *,
     beacon: str,
@@ -73,3 +98,30 @@ def scenario_from(
         paper_colour=paper_colour,
         render=RenderSettings(spp=spp, oversampling=oversampling, seed=seed),
     )
+
+
+def scenario_command(function: Callable) -> Callable:
+    """Give a command the scenario options of :data:`SCENARIO_OPTIONS`.
+
+    typer sees them as the command's parameters (after its required ones, before its
+    other options); the function itself takes the validated :class:`Scenario` as its
+    ``scenario`` argument, so the options and their defaults are written once.
+    """
+    hints = typing.get_type_hints(function, include_extras=True)
+    own = [
+        p.replace(kind=Parameter.KEYWORD_ONLY, annotation=hints[p.name])
+        for p in inspect.signature(function).parameters.values()
+        if p.name != "scenario"
+    ]
+    added = [Parameter(n, Parameter.KEYWORD_ONLY, default=d, annotation=o) for n, o, d in SCENARIO_OPTIONS]
+    required = [p for p in own if p.default is Parameter.empty]
+    rest = [p for p in own if p.default is not Parameter.empty]
+
+    @functools.wraps(function)
+    def command(**kwargs):
+        values = {name: kwargs.pop(name) for name, _, _ in SCENARIO_OPTIONS}
+        return function(scenario=scenario_from(**values), **kwargs)
+
+    command.__signature__ = inspect.Signature([*required, *added, *rest], return_annotation=None)
+    command.__annotations__ = {p.name: p.annotation for p in [*own, *added]}
+    return command

@@ -14,37 +14,20 @@ from scenes.radiance_io import write_band_cube_exr, write_preview_png, write_rad
 from scenes.render import render as render_scenario
 from scenes.render import side_current_mA
 from scenes.render_cache import RenderCache, atomic_write_bytes
+from scenes.scenario import Scenario
 from scenes.view import project
 from studies.cli import options as opt
 from studies.cli.common import console, prepare_out_dir
 
 
+@opt.scenario_command
 def render(
     out: opt.Out,
-    beacon: opt.Beacon = "v2",
-    side: opt.Side = "red",
-    range_m: opt.RangeM = 5.0,
-    yaw_deg: opt.YawDeg = 10.0,
-    camera: opt.Camera = "canon-t6-18mm",
-    environment: opt.Environment = "dark",
-    led_current_ma: opt.CurrentMA = None,
-    camera_height_m: opt.HeightM = 0.0,
-    housing: opt.Housing = "black",
-    foam: opt.Foam = False,
-    paper_sheets: opt.Sheets = 0,
-    paper_colour: opt.PaperColour = "white",
-    spp: opt.Spp = 16,
-    oversampling: opt.Oversampling = 3,
-    seed: opt.Seed = 0,
+    scenario: Scenario,
     cube: Annotated[bool, typer.Option("--cube", help="Also write the 10 nm band cube (radiance_cube.exr).")] = False,
     no_cache: opt.NoCache = False,
 ) -> None:
     """Render spectral radiance of a beacon on a camera's pixel grid (crop around the beacon)."""
-    scenario = opt.scenario_from(
-        beacon=beacon, side=side, range_m=range_m, yaw_deg=yaw_deg, camera=camera, environment=environment,
-        led_current_ma=led_current_ma, camera_height_m=camera_height_m, housing=housing, foam=foam,
-        paper_sheets=paper_sheets, paper_colour=paper_colour, spp=spp, oversampling=oversampling, seed=seed,
-    )  # fmt: skip
     prepare_out_dir(out)
     write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
 

@@ -42,8 +42,8 @@ from pipeline.detect import ESTIMATORS, TRACKERS
 from pipeline.evaluate import evaluate_detection
 from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.background import render_background
-from scenes.render import render, with_led_current
 from scenes.radiance import SpectralRadiance
+from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 

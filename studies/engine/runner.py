@@ -209,7 +209,10 @@ def _run_pool(
     # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked; each
     # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
     n = min(workers, len(batches))
-    with worker_threads(n, threads_per_worker), ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool:
+    with (
+        worker_threads(n, threads_per_worker),
+        ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool,
+    ):
         futures = {pool.submit(run_batch, function, list(batch.values())): batch for batch in batches}
         for future in as_completed(futures):
             _store_batch(store, futures[future], future.result(), advance)
@@ -232,7 +235,9 @@ class worker_threads:
         return False
 
 
-def _run_dask(address: str, function: TaskFunction, batches: list[dict[str, dict]], store: ResultStore, advance) -> None:
+def _run_dask(
+    address: str, function: TaskFunction, batches: list[dict[str, dict]], store: ResultStore, advance
+) -> None:
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 

@@ -49,9 +49,7 @@ def pose_success(row: dict) -> bool:
         return False
     r, y = row.get("range_err_m"), row.get("yaw_err_deg")
     rng = row.get("range_m", 1.0)
-    return bool(
-        np.isfinite(r) and abs(r) <= RANGE_TOLERANCE * rng and np.isfinite(y) and abs(y) <= YAW_TOLERANCE_DEG
-    )
+    return bool(np.isfinite(r) and abs(r) <= RANGE_TOLERANCE * rng and np.isfinite(y) and abs(y) <= YAW_TOLERANCE_DEG)
 
 
 def failure_cause(row: dict) -> str:

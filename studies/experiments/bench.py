@@ -143,7 +143,6 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
     """One full T6 frame through optics, sensor, ISP (JPEG) and both detectors, versus a
     plain copy of the same frame's bytes (18 MP × 3 × 8 bit)."""
 
-
     scenario = Scenario(**BENCH_SCENARIO, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
     camera = load_camera(scenario.camera)
     radiance = render(scenario)
@@ -206,7 +205,6 @@ def workers_and_dask(tasks: int = 12) -> dict:
     the near-field marker render they share is computed beforehand (untimed)."""
 
     from dask.distributed import LocalCluster
-
 
     saved = os.environ.get("BEACON_SIM_CACHE")
     times = {}

@@ -62,7 +62,9 @@ def test_poses_keep_the_board_inside_the_frame_and_reach_the_corners():
     for name, k, _ in CASES:
         cam = scaled_camera(name, k)
         g = cam.geometry
-        uv = np.concatenate([project_true(cam, r, t, board_points_m(INNER, SQUARE_M).astype(float)) for r, t in board_poses(cam)])
+        uv = np.concatenate(
+            [project_true(cam, r, t, board_points_m(INNER, SQUARE_M).astype(float)) for r, t in board_poses(cam)]
+        )
         assert np.all(np.isfinite(uv))
         assert uv[:, 0].min() > 0 and uv[:, 1].min() > 0
         assert uv[:, 0].max() < g.width_px - 1 and uv[:, 1].max() < g.height_px - 1

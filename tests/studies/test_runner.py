@@ -34,7 +34,8 @@ def test_sequential_run_and_store(tmp_path):
 
 def _run_in_subprocess(out):
     code = (
-        "import sys, json; from studies.engine.runner import run_tasks; from tests.studies.test_runner import TASKS, FN;"
+        "import sys, json; from studies.engine.runner import run_tasks;"
+        "from tests.studies.test_runner import TASKS, FN;"
         f"rows = run_tasks(TASKS, r'{out}', FN, workers=2);"
         f"open(r'{out}/table.json', 'w').write(json.dumps(rows, sort_keys=True))"
     )
@@ -61,18 +62,14 @@ def test_dask_local_cluster_gives_the_same_table(tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     local = _table(run_tasks(TASKS[:8], tmp_path / "pool", FN, workers=2))
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        remote = _table(
-            run_tasks(TASKS[:8], tmp_path / "dask", FN, scheduler=cluster.scheduler_address)
-        )
+        remote = _table(run_tasks(TASKS[:8], tmp_path / "dask", FN, scheduler=cluster.scheduler_address))
     assert remote == local
 
 
 def test_batched_tasks_give_the_same_table_and_are_stored_one_by_one(tmp_path):
     tasks = [{**t, "sleep_s": 0.0} for t in TASKS]
     single = _table(run_tasks(tasks, tmp_path / "single", FN, workers=2))
-    batched = run_tasks(
-        tasks, tmp_path / "batched", FN, workers=2, batch_key=lambda t: str(t["seed"] % 3), max_batch=5
-    )
+    batched = run_tasks(tasks, tmp_path / "batched", FN, workers=2, batch_key=lambda t: str(t["seed"] % 3), max_batch=5)
     assert _table(batched) == single
     store = ResultStore(tmp_path / "batched" / "tasks")
     assert all(store.get(task_key(FN, t, 1)) is not None for t in tasks)

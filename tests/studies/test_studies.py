@@ -179,7 +179,9 @@ def test_chunked_sweep_equals_one_sweep_and_rereads_only_chunk_tables(tmp_path, 
 
     o = replication.default_options(True).with_overrides(ranges_m=(2.0, 5.0, 9.0), seeds=3)
     calls = []
-    monkeypatch.setattr(common, "run_frames", lambda tasks, out, *args, **kw: calls.append(len(tasks)) or _fake_rows(tasks))
+    monkeypatch.setattr(
+        common, "run_frames", lambda tasks, out, *args, **kw: calls.append(len(tasks)) or _fake_rows(tasks)
+    )
     whole = common.sweep("x", replication.conditions(o), o, tmp_path / "whole")
     chunked = common.sweep_in_chunks("x", replication.chunks(o), o, tmp_path / "chunked")
     assert len(replication.chunks(o)) == 4 and sum(calls[1:]) == calls[0] == len(whole) // 2
