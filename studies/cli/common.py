@@ -4,6 +4,7 @@ progress bar handed to long runs, and tables that never truncate names."""
 from __future__ import annotations
 
 import contextlib
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -52,8 +53,13 @@ def rich_progress(description: str, total: int, done: int) -> Iterator[Callable[
 
 
 def print_table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
-    """A table on stdout whose first column (the names) is never truncated or wrapped:
-    in a narrow terminal or a pipe the other columns wrap instead."""
+    """A table on stdout. In a terminal, a rich table whose first column (the names) is never
+    truncated or wrapped (in a narrow one the other columns wrap instead); piped, plain
+    tab-separated lines with a header, for scripts (``--json`` gives every field)."""
+    if not sys.stdout.isatty():
+        for line in (columns, *rows):
+            print("\t".join(cell.replace("\t", " ") for cell in line))
+        return
     table = Table(title=title)
     width = max([len(columns[0]), *(len(r[0]) for r in rows)])
     table.add_column(columns[0], no_wrap=True, min_width=width)

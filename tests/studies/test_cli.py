@@ -87,3 +87,62 @@ def test_render_writes_exr_preview_and_json(tmp_path):
         "render", "--out", str(out), "--range-m", "9", "--spp", "2", "--oversampling", "1", "--environment", "lit-room"
     )
     assert json.loads((out / "render.json").read_text())["from_cache"] is True, again.stderr
+
+
+def _commands(help_text: str) -> set[str]:
+    """Command names in a typer --help screen (its Commands box)."""
+    box = help_text.split("Commands")[1]
+    return {line.split()[1] for line in box.splitlines() if line.startswith("│ ") and not line.startswith("│  ")}
+
+
+def test_module_and_console_script_list_the_same_commands_and_the_readme_names_only_those():
+    from pathlib import Path
+
+    from studies.cli.app import app
+
+    registered = {c.name for c in app.registered_commands}
+    as_module = subprocess.run(
+        [sys.executable, "-m", "studies.cli", "--help"], capture_output=True, text=True, timeout=120
+    )
+    assert as_module.returncode == 0, as_module.stderr
+    assert _commands(as_module.stdout) == _commands(run("--help").stdout) == registered
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    blocks = readme.split("```")[1::2]  # the code blocks
+    named = {
+        line.split()[1]
+        for block in blocks
+        for line in block.splitlines()
+        if line.startswith("beacon-sim ") and not line.split()[1].startswith("-")
+    }
+    named |= {  # "beacon-sim a | b | c" lists several
+        word
+        for block in blocks
+        for line in block.splitlines()
+        if " | " in line and line.startswith("beacon-sim ")
+        for word in line.split("  ")[0].replace("beacon-sim", "").replace("|", " ").split()
+    }
+    assert len(named) >= 15 and named <= registered, named - registered
+
+
+@pytest.mark.parametrize("listing", ["cameras", "beacons"])
+def test_piped_listings_are_tab_separated_with_full_names(listing):
+    rows = json.loads(run(listing, "--json").stdout)
+    lines = [line.split("\t") for line in run(listing).stdout.splitlines()]
+    assert lines[0][0] == "name" and len({len(line) for line in lines}) == 1
+    assert sorted({line[0] for line in lines[1:]}) == sorted(r["name"] for r in rows)
+
+
+def test_narrow_terminal_table_keeps_full_names():
+    from rich.console import Console
+
+    from studies.cli import common
+
+    names = ["canon-t6-18mm", "logitech-c270"]
+    console = Console(width=40, force_terminal=True, record=True)
+    rows = [(n, "5184×3456", "a long description that must wrap") for n in names]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(common, "Console", lambda: console)
+        mp.setattr(common.sys.stdout, "isatty", lambda: True)
+        common.print_table("Cameras", ("name", "resolution", "description"), rows)
+    text = console.export_text()
+    assert all(n in text for n in names), text
