@@ -72,7 +72,7 @@ def conditions(o: StudyOptions) -> list[dict]:
 
 def chunks(o: StudyOptions) -> list[list[dict]]:
     """The conditions in chunks of one camera, beacon and diffuser (22 400 frames in the
-    full grid), the unit in which :func:`studies.common.sweep_in_chunks` runs and stores."""
+    full grid), the unit in which :func:`studies.engine.sweep.sweep_in_chunks` runs and stores."""
 
     def label(c: dict) -> tuple:
         return c["camera"], c["beacon"], c["foam"], c["paper_sheets"], c["paper_colour"]

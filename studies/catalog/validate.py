@@ -18,7 +18,6 @@ the study's headline conclusions agree/disagree from those rows.
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -157,11 +156,6 @@ def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
     return out
 
 
-def _true_colour_blobs(reason: str, side: str) -> int | None:
-    m = re.search(rf"{side}: (\d+)", reason or "")
-    return int(m.group(1)) if m else None
-
-
 def validation_table(frame):
     """One row per tested condition (means over seeds)."""
 
@@ -171,7 +165,8 @@ def validation_table(frame):
         rec = dict(zip(keys, key, strict=True))
         recs = g.to_dict("records")
         detected = [bool(r["detected"]) for r in recs]
-        merged = [not r["detected"] and (_true_colour_blobs(r["reason"], r["side"]) or 0) < 5 for r in recs]
+        # merged or lost: not detected, and the tracker found fewer than five blobs of the side's colour
+        merged = [not r["detected"] and not (r["side_blobs"] >= 5) for r in recs]
         colour_ok = [bool(r["side_correct"]) for r in recs if r["detected"]]
         out.append(
             {
