@@ -90,9 +90,8 @@ def saturation_table(
     if workers is not None and workers < 1:
         raise UsageError(f"workers: expected an integer >= 1, got {workers}")
     prepare_out_dir(out)
-    rows = saturation.saturation_rows(
-        out, cameras, spp=spp, oversampling=oversampling, seed=seed, workers=workers, progress=rich_progress
-    )
+    tasks = saturation.saturation_tasks(cameras, spp=spp, oversampling=oversampling, seed=seed)
+    rows = saturation.saturation_rows(out, tasks, workers=workers, progress=rich_progress)
     saturation.write_csv(rows, out / "saturation_table.csv")
     (out / "saturation_table.md").write_text(saturation.summary_markdown(rows), encoding="utf-8")
     console.print(f"wrote {out}/saturation_table.csv ({len(rows)} rows) and saturation_table.md")

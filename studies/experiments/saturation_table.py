@@ -153,21 +153,11 @@ def saturation_rows_of(task: dict) -> list[dict]:
 
 
 def saturation_rows(
-    out: Path,
-    cameras: Sequence[str] = CAMERAS,
-    ranges_m: Sequence[float] = RANGES_M,
-    drives_mA: Sequence[float] = DRIVES_MA,
-    diffusers: Sequence[tuple[bool, int]] = DIFFUSERS,
-    spp: int = 4,
-    oversampling: int = 2,
-    seed: int = 0,
-    workers: int | None = None,
-    progress: Progress = no_progress,
+    out: Path, tasks: list[dict], workers: int | None = None, progress: Progress = no_progress
 ) -> list[dict]:
-    """One row per (camera, range, diffuser, drive, marker) (:data:`FIELDS`), in that order;
-    tasks stored under ``out/tasks``, a re-run resumes. ``workers``: local processes
-    (default one per CPU)."""
-    tasks = saturation_tasks(cameras, ranges_m, drives_mA, diffusers, spp, oversampling, seed)
+    """One row per (camera, range, diffuser, drive, marker) (:data:`FIELDS`) of the tasks of
+    :func:`saturation_tasks`, in their order; tasks stored under ``out/tasks``, a re-run
+    resumes. ``workers``: local processes (default one per CPU)."""
     return run_tasks(
         tasks,
         out,

@@ -103,10 +103,10 @@ def test_tasks_cover_camera_range_diffuser_drive():
 
 def test_t6_case_through_the_engine_and_the_store(tmp_path, mitsuba_variant, monkeypatch):
     """T6 at 5 m, bare LED, 20 mA: the camera file's manual exposure, core sizes from the lens, stored rows reused."""
-    rows = saturation_rows(
-        tmp_path, ["canon-t6-18mm"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1, oversampling=1,
-        workers=1,
-    )  # fmt: skip
+    tasks = saturation_tasks(
+        ["canon-t6-18mm"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1, oversampling=1
+    )
+    rows = saturation_rows(tmp_path, tasks, workers=1)
     assert [r["marker"] for r in rows] == [1, 2, 3, 4, 5]
     cam = load_camera("canon-t6-18mm")
     clip = min(cam.sensor.white_level_DN, 2**cam.sensor.adc_bits - 1)
@@ -125,26 +125,20 @@ def test_t6_case_through_the_engine_and_the_store(tmp_path, mitsuba_variant, mon
         assert r["saturated_fraction"] == 0 or r["peak_DN"] == clip  # a clipped core pixel is the peak
         for c in "RGB":
             assert math.isnan(r[f"saturated_fraction_{c}"]) or 0.0 <= r[f"saturated_fraction_{c}"] <= 1.0
-    task = saturation_tasks(["canon-t6-18mm"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1,
-                            oversampling=1)[0]  # fmt: skip
-    assert _json(saturation_rows_of(task)) == _json(rows)  # the stored rows are the function's, unchanged
+    assert _json(saturation_rows_of(tasks[0])) == _json(rows)  # the stored rows are the function's, unchanged
 
     def no_capture(task):
         raise AssertionError("re-captured a stored frame")
 
     monkeypatch.setattr(saturation_table, "capture_frame", no_capture)
-    again = saturation_rows(
-        tmp_path, ["canon-t6-18mm"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1, oversampling=1,
-        workers=1,
-    )  # fmt: skip
+    again = saturation_rows(tmp_path, tasks, workers=1)
     assert _json(again) == _json(rows)
 
 
 @pytest.mark.slow
 def test_one_real_webcam_case_through_render_and_capture(tmp_path, mitsuba_variant):
-    rows = saturation_rows(
-        tmp_path, ["logitech-c270"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1, workers=1
-    )
+    tasks = saturation_tasks(["logitech-c270"], ranges_m=[5.0], drives_mA=[20.0], diffusers=[(False, 0)], spp=1)
+    rows = saturation_rows(tmp_path, tasks, workers=1)
     assert [r["marker"] for r in rows] == [1, 2, 3, 4, 5]
     assert all(0.0 <= r["saturated_fraction"] <= 1.0 for r in rows)
     assert rows[0]["exposure_mode"] == "auto" and rows[0]["gain_code"] is not None
