@@ -2,9 +2,6 @@
 
 Reflects a fraction R and transmits a fraction T of incident light, each as a perfect
 Lambertian lobe, on both sides: f = R/π on the incident side, T/π on the other.
-
-The class is built by a factory against the *active* variant's base class, so
-:func:`scenes.plugins.register_plugins` calls it once per variant, after the variant is set.
 """
 
 from __future__ import annotations

@@ -15,9 +15,6 @@ pdfs are consistent, so multiple importance sampling stays unbiased.
 A marker with diffusers instead carries a ``profile``: a bitmap texture holding its
 exit radiance L(r, θ) (rows: viewing angle θ from 0 to 90°, columns: radius r from the
 centre to the edge, values at bin centres), which multiplies ``radiance``.
-
-The class is built by a factory against the *active* variant's base class, so
-:func:`scenes.plugins.register_plugins` calls it once per variant, after the variant is set.
 """
 
 from __future__ import annotations
