@@ -30,7 +30,7 @@ from pipeline.image_io import as_bgr
 from pipeline.markers import TrackResult
 from pipeline.messages import LEDPoints
 from pipeline.pose import pnp_pose
-from pipeline.thesis_pose import thesis_pose_from_vectors
+from pipeline.thesis_pose import STUDY_WEIGHTS, thesis_pose_from_vectors
 from pipeline.thesis_tracker import ThesisTrackerSettings, thesis_track
 from pipeline.tracker import TrackerSettings, track
 from scenes.beacon import BeaconDesign, beacon_design
@@ -129,7 +129,7 @@ def _estimate_thesis(tr: TrackResult, intrinsics: Intrinsics, design: BeaconDesi
         s_az, s_el = tr.azimuth_rad, tr.elevation_rad
     else:  # the study's formula on full-resolution, full-frame pixels
         s_az, s_el = study_angles(tr.uv[:, 0], tr.uv[:, 1], (intrinsics.width_px, intrinsics.height_px), intrinsics)
-    est = thesis_pose_from_vectors(study_unit_vectors(s_az, s_el), design)
+    est = thesis_pose_from_vectors(study_unit_vectors(s_az, s_el), design, weights=options["quest_weights"])
     if not all(est.converged):
         result.notes.append(f"Newton did not converge (triads converged: {list(est.converged)})")
     result.pose = est.pose
@@ -179,6 +179,7 @@ def detect(
     tracker_settings: TrackerSettings | None = None,
     thesis_settings: ThesisTrackerSettings | None = None,
     track_cache: dict | None = None,
+    quest_weights: tuple[float, float, float, float] = STUDY_WEIGHTS,
 ) -> Detection:
     """Detect the beacon side in ``image`` and estimate the camera pose.
 
@@ -210,6 +211,8 @@ def detect(
     track_cache
         A dict shared by calls on the *same image with the same settings* that differ only
         in ``estimator``: the tracker then runs once (it is by far the slower stage).
+    quest_weights
+        QUEST weights of w2..w5 for the ``thesis`` estimator (default the study's tuned set).
     """
     _check_choice("tracker", tracker, TRACKERS)
     _check_choice("estimator", estimator, ESTIMATORS)
@@ -257,7 +260,7 @@ def detect(
     ]  # fmt: skip
     if tr.side is not None:
         result.led_points = LEDPoints(ring_camera or 0, tr.side, tuple(az), tuple(el))
-    ESTIMATORS[estimator](tr, intr, design, result, {"sigma_px": sigma_px})
+    ESTIMATORS[estimator](tr, intr, design, result, {"sigma_px": sigma_px, "quest_weights": quest_weights})
     if result.pose is None:
         return result
     if tr.side is not None:

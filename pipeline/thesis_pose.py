@@ -46,6 +46,10 @@ from scenes.beacon import BeaconDesign
 
 STUDY_WEIGHTS = (0.05, 0.05, 0.45, 0.45)
 """QUEST weights for w2..w5 after the study's tuning (docs/source-study.md §7)."""
+EQUAL_WEIGHTS = (0.25, 0.25, 0.25, 0.25)
+"""The study's starting point before tuning: equal QUEST weights (docs/source-study.md §7)."""
+QUEST_WEIGHTS = {"tuned": STUDY_WEIGHTS, "equal": EQUAL_WEIGHTS}
+"""The two weight sets of the study's weight experiment, by label."""
 
 HORIZONTAL = (0, 1, 2)
 VERTICAL = (0, 3, 4)

@@ -11,6 +11,9 @@ worker process or a Dask cluster):
 ``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
 ``tags``       optional fields copied into every row (e.g. the test's name)
 ``full_frame`` capture and detect on the whole frame instead of the rendered crop
+``quest_weights``  optional ``tuned`` (default, the study's) or ``equal`` QUEST weights
+``rectification``  optional ``{"alpha": 0 or 1}``: undistort before detecting, as the study's
+               rectification did (ideal calibration: :mod:`camera_models.rectification`)
 ``align_px``   optional: pad the rendered crop with zero radiance so its origin and size are
                multiples of this (JPEG blocks and the study's 50 % resize then group the
                pixels as in the full frame)
@@ -37,9 +40,12 @@ from numpy.typing import NDArray
 from camera_models.camera import Camera, load_camera
 from camera_models.capture import Capture, capture, marker_core_saturation, marker_pixels
 from camera_models.exposure import manual_exposure
+from camera_models.rectification import opencv_distortion
 from pipeline.angles import Intrinsics
+from pipeline.calibration import Calibration
 from pipeline.detect import ESTIMATORS, TRACKERS
 from pipeline.evaluate import evaluate_detection
+from pipeline.thesis_pose import QUEST_WEIGHTS
 from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.background import render_background
 from scenes.radiance import SpectralRadiance
@@ -133,6 +139,7 @@ def simulate_frame(task: dict) -> list[dict]:
         **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
     }
     intrinsics = Intrinsics.from_geometry(camera.geometry)
+    detect_options = _detect_options(task, camera)
     rows = []
     for tracker, label, settings in _detectors(task):
         tracked: dict = {}  # the tracker runs once; each estimator reuses its result
@@ -147,6 +154,7 @@ def simulate_frame(task: dict) -> list[dict]:
                 crop_origin_px=(cap.x0, cap.y0),
                 thesis_settings=settings,
                 track_cache=tracked,
+                **detect_options,
             )
             rows.append(
                 {
@@ -169,6 +177,26 @@ def simulate_frame(task: dict) -> list[dict]:
                 }
             )
     return rows
+
+
+def _detect_options(task: dict, camera: Camera) -> dict:
+    """Detector options a task asks for: the study's weight experiment (``quest_weights``:
+    ``tuned`` or ``equal``) and rectification (``rectification``: ``{"alpha": 0 or 1}``, with
+    the lens's own distortion in OpenCV's model as the calibration: an ideal calibration)."""
+    options = {}
+    if task.get("quest_weights"):
+        if task["quest_weights"] not in QUEST_WEIGHTS:
+            raise ValueError(
+                f"quest_weights: expected one of {', '.join(QUEST_WEIGHTS)}, got {task['quest_weights']!r}"
+            )
+        options["quest_weights"] = QUEST_WEIGHTS[task["quest_weights"]]
+    if task.get("rectification") is not None:
+        fit = opencv_distortion(camera)
+        options["calibration"] = Calibration(
+            fit.camera_matrix, fit.dist_coeffs, fit.width_px, fit.height_px, fit.max_error_px, 0
+        )
+        options["alpha"] = float(task["rectification"]["alpha"])
+    return options
 
 
 def _detectors(task: dict):
