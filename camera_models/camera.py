@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
 
 import colour
 import numpy as np
 from numpy.typing import NDArray
 
+from camera_models.glare import GlareSpread
 from scenes import spectra
 from scenes.sourced import load_sourced
 from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry, camera_names
@@ -56,6 +57,11 @@ class LensModel:
         lensfun's crop-factor rescaling: lens calibration crop factor / camera crop factor.
     vignetting
         lensfun vignetting entries by f-number; empty means natural relative illumination.
+    glare
+        Veiling-glare tail (``[optics.glare]``, see :mod:`camera_models.glare`); None: no data.
+    crosstalk_fraction, crosstalk_diagonal_share
+        Pixel crosstalk (``[optics.crosstalk]``): fraction of a pixel's charge collected by
+        its 8 neighbours, and the diagonal neighbours' share of it; 0 without data.
     """
 
     f_number: float
@@ -67,6 +73,9 @@ class LensModel:
     vignetting: tuple[VignettingEntry, ...]
     lensfun_camera: str | None
     lensfun_lens: str | None
+    glare: GlareSpread | None = None
+    crosstalk_fraction: float = 0.0
+    crosstalk_diagonal_share: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -157,9 +166,19 @@ class ISPModel:
     white_balance: str  # "daylight" or "auto"
     awb_max_gain_ratio: float
     camera_to_xyz: NDArray[np.float64]  # 3×3, white-balanced camera RGB -> XYZ (D65 white)
-    tone_curve: str
+    tone_curve: str  # "srgb" or "picture-standard"
     jpeg_quality: int
     chroma_subsampling: str
+    # stages after white balance, from the body's [isp.processing_options.<processing>] table; defaults = "legacy"
+    processing: str = "legacy"
+    highlight: str = "clip"  # "clip" (dcraw -H 0), "unclip" (-H 1) or "blend" (-H 2)
+    noise_reduction: str = "none"  # "none" or "nlmeans"
+    nr_analog_gain: tuple[float, ...] = ()  # analog gain (relative to base) of each strength point
+    nr_luma_h: tuple[float, ...] = ()  # non-local means h on L, 8-bit code units, per point
+    nr_chroma_h: tuple[float, ...] = ()  # non-local means hColor on a, b, 8-bit code units, per point
+    tone_contrast: float = 0.0  # S-curve weight of "picture-standard", 0-1
+    sharpening_amount: float = 0.0  # unsharp-mask amount on luma (0 = off)
+    sharpening_sigma_px: float = 1.0  # unsharp-mask Gaussian sigma, px
 
 
 @dataclass(frozen=True)
@@ -270,6 +289,16 @@ def load_camera(name: str) -> Camera:
         ),
         lensfun_camera=o.get("lensfun_camera"),
         lensfun_lens=o.get("lensfun_lens"),
+        glare=GlareSpread(
+            fraction=float(o["glare"]["fraction"]),
+            knee_um=float(o["glare"]["knee_um"]),
+            exponent=float(o["glare"]["exponent"]),
+            outer_radius_mm=float(o["glare"]["outer_radius_mm"]),
+        )
+        if "glare" in o
+        else None,
+        crosstalk_fraction=float(o.get("crosstalk", {}).get("fraction", 0.0)),
+        crosstalk_diagonal_share=float(o.get("crosstalk", {}).get("diagonal_share", 0.0)),
     )
     s = body["sensor"]
     qe = load_ssf_qe(s["ssf_csv"], float(s["peak_qe"]), bool(s["ssf_is_energy_response"]))
@@ -309,14 +338,28 @@ def load_camera(name: str) -> Camera:
         camera_to_xyz = np.linalg.inv(xyz_to_camera) @ np.diag(neutral / neutral[1])
     else:
         camera_to_xyz = camera_to_xyz_from_ssf(qe)
+    processing = i.get("processing", "legacy")
+    profiles = i.get("processing_options", {})
+    if processing not in profiles and processing != "legacy":
+        raise ValueError(f"isp.processing: expected one of {', '.join(profiles) or 'legacy'}, got {processing!r}")
+    pp = profiles.get(processing, {})
     isp = ISPModel(
         demosaic=i["demosaic"],
         white_balance=i["white_balance"],
         awb_max_gain_ratio=float(i.get("awb_max_gain_ratio", 1.0)),
         camera_to_xyz=camera_to_xyz,
-        tone_curve=i["tone_curve"],
+        tone_curve=pp.get("tone_curve", i.get("tone_curve", "srgb")),
         jpeg_quality=int(i["jpeg_quality"]),
         chroma_subsampling=i["chroma_subsampling"],
+        processing=processing,
+        highlight=pp.get("highlight", "clip"),
+        noise_reduction=pp.get("noise_reduction", "none"),
+        nr_analog_gain=tuple(float(v) for v in pp.get("nr_analog_gain", ())),
+        nr_luma_h=tuple(float(v) for v in pp.get("nr_luma_h", ())),
+        nr_chroma_h=tuple(float(v) for v in pp.get("nr_chroma_h", ())),
+        tone_contrast=float(pp.get("tone_contrast", 0.0)),
+        sharpening_amount=float(pp.get("sharpening_amount", 0.0)),
+        sharpening_sigma_px=float(pp.get("sharpening_sigma_px", 1.0)),
     )
     e = body["exposure"]
     exposure = ExposureModel(
@@ -330,3 +373,36 @@ def load_camera(name: str) -> Camera:
         ae_damping=float(e["ae_damping"]) if "ae_damping" in e else None,
     )
     return Camera(name, geometry, lens, sensor, isp, exposure)
+
+
+def with_overrides(camera: Camera, overrides: dict[str, object]) -> Camera:
+    """``camera`` with some fields of its parts replaced: ``{"lens.f_number": 5.6, "isp.jpeg_quality": 90}``.
+
+    Each key is a dotted path of dataclass fields below the camera (``<part>.<field>``, in the
+    part's own units, e.g. ``exposure.max_exposure_s`` in s). An empty mapping returns
+    ``camera`` itself. A path that names no field raises ``ValueError`` (one line, naming it).
+    """
+    if not overrides:
+        return camera
+    for path, value in overrides.items():
+        camera = _replace_path(camera, str(path).split("."), value, str(path))
+    return camera
+
+
+def _replace_path(obj, keys: list[str], value: object, path: str):
+    name = keys[0]
+    if obj is None:
+        raise ValueError(f"camera override {path!r}: this camera has no data for the part holding {name!r} (None)")
+    names = [f.name for f in fields(obj)] if is_dataclass(obj) and not isinstance(obj, type) else []
+    if name not in names:
+        where = type(obj).__name__
+        expected = f"one of {', '.join(names)}" if names else "no further fields"
+        raise ValueError(f"camera override {path!r}: {where} has no field {name!r} (expected {expected})")
+    current = getattr(obj, name)
+    if len(keys) > 1:
+        value = _replace_path(current, keys[1:], value, path)
+    elif is_dataclass(current):
+        raise ValueError(f"camera override {path!r}: names a part, not a field (override one of its fields)")
+    elif isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    return replace(obj, **{name: value})

@@ -163,7 +163,7 @@ def capture(
     del mean_rgb
     raw = expose(mean, camera.sensor, SensorSettings(t, exposure.analog_gain), seed, x0, y0)
     clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)
-    image = process(raw, camera, x0, y0)
+    image = process(raw, camera, x0, y0, analog_gain=exposure.analog_gain)
     return Capture(raw, image, exposure, x0, y0, float(np.mean(raw >= clip)))
 
 

@@ -2,9 +2,43 @@
 
 black level → normalise to the white level → demosaic (OpenCV, bilinear) → white
 balance (daylight gains from the sensor's own sensitivities under D65, or grey-world
-auto white balance limited around them) → clip (raw highlights become white) →
-camera RGB → CIE XYZ (D65) → linear sRGB (colour-science) → sRGB tone curve → 8 bit →
-JPEG at the camera's quality and chroma subsampling (OpenCV/libjpeg).
+auto white balance limited around them) → highlight handling → camera RGB → CIE XYZ
+(D65) → linear sRGB (colour-science) → tone curve → 8 bit → noise reduction →
+sharpening → JPEG at the camera's quality and chroma subsampling (OpenCV/libjpeg).
+
+The stages after white balance are options of :class:`camera_models.camera.ISPModel`,
+chosen per body by ``[isp] processing`` (a ``[isp.processing_options.<name>]`` table):
+
+highlight
+    ``clip``: clip every channel at the white level after white balance, as dcraw's
+    default ``-H 0`` ("clip all highlights to solid white"); a pixel clipped in R and G
+    but not B stays yellow. ``unclip``: keep values above the clip through white balance
+    and the colour matrix, clip only the output (dcraw ``-H 1``, "leave highlights
+    unclipped in various shades of pink"). ``blend``: dcraw ``-H 2`` ("blend clipped and
+    unclipped values together for a gradual fade to white"), ``blend_highlights()`` of
+    dcraw.c / LibRaw: lightness and hue of the unclipped pixel, chroma of the clipped one.
+    Sources: dcraw(1) man page (https://linux.die.net/man/1/dcraw); LibRaw
+    ``output_params.highlight`` "0-9: Highlight mode (0=clip, 1=unclip, 2=blend,
+    3+=rebuild)" (https://www.libraw.org/docs/API-datastruct-eng.html); dcraw.c
+    ``blend_highlights()``.
+noise reduction
+    ``none`` or ``nlmeans``: OpenCV's non-local means on CIELAB
+    (``cv2.fastNlMeansDenoisingColored``; ``h`` acts on L, ``hColor`` on a, b), with luma
+    and chroma strengths interpolated in log(analog gain) from the body's table. Canon
+    EOS JPEGs get "High ISO speed noise reduction", default "Standard", applied at all
+    ISOs and stronger at higher ISOs, reducing both chroma and luminance noise (DPReview,
+    Canon EOS-1D Mark IV review p. 18; Imaging Resource, Canon 60D / T4i high-ISO NR pages).
+tone curve
+    ``srgb`` (IEC 61966-2-1, colour-science) or ``picture-standard``: Canon Picture Style
+    "Standard" uses a contrastier tone curve than the flat styles (DPReview, EOS 400D /
+    50D reviews: "Type 1 (more contrast)"); Canon does not publish it, so it is modelled
+    as an S-curve on the sRGB-encoded value, y = (1 − c)·v + c·(3v² − 2v³), 0 ≤ c ≤ 1.
+sharpening
+    Unsharp mask on luma (Y of YCbCr): Y + a·(Y − Gσ * Y); a = 0 is off. Picture Style
+    sharpness is a 0-7 setting applied to JPEGs (DPReview EOS 400D / 50D reviews).
+
+The ``legacy`` processing (clip, no noise reduction, sRGB, no sharpening) is the order
+and arithmetic of the earlier ISP, byte for byte.
 """
 
 from __future__ import annotations
@@ -89,9 +123,61 @@ class ProcessedImage:
     wb_gains: NDArray[np.float64]
 
 
-def process(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -> ProcessedImage:
-    """Run the camera's ISP on a raw mosaic whose top-left pixel sits at (x0, y0) in the frame."""
+HIGHLIGHT_MODES = ("clip", "unclip", "blend")
+NOISE_REDUCTION_METHODS = ("none", "nlmeans")
+TONE_CURVES = ("srgb", "picture-standard")
+NLMEANS_TEMPLATE_PX = 7
+"""Non-local means patch size, px (OpenCV documentation: "templateWindowSize ... recommended value 7")."""
+NLMEANS_SEARCH_PX = 21
+"""Non-local means search window, px (OpenCV documentation: "searchWindowSize ... recommended value 21")."""
+_SQRT3 = float(np.sqrt(3.0))
+# dcraw.c blend_highlights(), 3 colours: camera RGB -> (lightness, two opponent chroma axes) and back (× 3)
+_BLEND_TRANS = np.array([[1.0, 1.0, 1.0], [_SQRT3, -_SQRT3, 0.0], [-1.0, -1.0, 2.0]])
+_BLEND_ITRANS = np.array([[1.0, _SQRT3 / 2, -0.5], [1.0, -_SQRT3 / 2, -0.5], [1.0, 0.0, 1.0]])
+
+
+def check_isp_options(camera: Camera) -> None:
+    """Raise ValueError naming the ISP field whose option is unknown or out of range."""
+    isp = camera.isp
+    if isp.highlight not in HIGHLIGHT_MODES:
+        raise ValueError(f"isp.highlight: expected one of {', '.join(HIGHLIGHT_MODES)}, got {isp.highlight!r}")
+    if isp.noise_reduction not in NOISE_REDUCTION_METHODS:
+        raise ValueError(
+            f"isp.noise_reduction: expected one of {', '.join(NOISE_REDUCTION_METHODS)}, got {isp.noise_reduction!r}"
+        )
+    if isp.noise_reduction != "none":
+        n = len(isp.nr_analog_gain)
+        if n == 0 or len(isp.nr_luma_h) != n or len(isp.nr_chroma_h) != n or any(np.diff(isp.nr_analog_gain) <= 0):
+            raise ValueError("isp.nr_analog_gain: expected increasing gains, one luma and one chroma strength each")
+    if isp.tone_curve not in TONE_CURVES:
+        raise ValueError(f"isp.tone_curve: expected one of {', '.join(TONE_CURVES)}, got {isp.tone_curve!r}")
+    if not 0.0 <= isp.tone_contrast <= 1.0:
+        raise ValueError(f"isp.tone_contrast: expected 0-1 (a monotonic curve), got {isp.tone_contrast!r}")
+    if isp.sharpening_amount < 0.0 or isp.sharpening_sigma_px <= 0.0:
+        raise ValueError("isp.sharpening_amount: expected amount >= 0 and sigma > 0")
+
+
+def process(
+    raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0, *, analog_gain: float | None = None
+) -> ProcessedImage:
+    """Run the camera's ISP on a raw mosaic whose top-left pixel sits at (x0, y0) in the frame.
+
+    Parameters
+    ----------
+    raw
+        Raw mosaic, DN.
+    camera
+        The camera; ``camera.isp`` chooses the stages (see the module docstring).
+    x0, y0
+        Frame position of ``raw``'s top-left pixel, px (sets the CFA phase).
+    analog_gain
+        Analog gain relative to base the frame was taken at (ISO / base ISO on a DSLR);
+        needed only when the ISP's noise reduction is on, whose strength follows it.
+    """
     s, isp = camera.sensor, camera.isp
+    check_isp_options(camera)
+    if isp.noise_reduction != "none" and (analog_gain is None or not np.isfinite(analog_gain) or analog_gain <= 0):
+        raise ValueError(f"analog_gain: noise reduction needs the frame's analog gain (> 0), got {analog_gain!r}")
     # float32 and, after demosaicing, in blocks of rows: a full T6 frame is 18 M pixels
     linear = raw.astype(np.float32)
     linear -= np.float32(s.black_level_DN)
@@ -105,18 +191,117 @@ def process(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -
         gains = auto_white_balance_gains(means, camera)
     else:
         raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
-    if isp.tone_curve != "srgb":
-        raise ValueError(f"isp.tone_curve: expected srgb, got {isp.tone_curve!r}")
     matrix_t = camera_to_srgb_matrix(camera).T.astype(np.float32)
     gains32 = np.asarray(gains, dtype=np.float32)
+    lut = None if isp.tone_curve == "srgb" else _tone_lut(isp.tone_curve, float(isp.tone_contrast))
     rgb8 = np.empty(rgb.shape, dtype=np.uint8)
     for r0 in range(0, rgb.shape[0], 256):
         block = rgb[r0 : r0 + 256]
         block *= gains32
-        np.clip(block, 0.0, 1.0, out=block)
-        rgb8[r0 : r0 + 256] = srgb_encode_8bit(block @ matrix_t)
+        if isp.highlight == "clip":
+            np.clip(block, 0.0, 1.0, out=block)
+        elif isp.highlight == "blend":
+            blend_highlights(block, 1.0)
+        # "unclip": values above 1 go through the matrix; the tone curve clips the output
+        out = block @ matrix_t
+        rgb8[r0 : r0 + 256] = srgb_encode_8bit(out) if lut is None else _apply_tone_lut(out, lut)
     del rgb
+    if isp.noise_reduction != "none":
+        luma_h, chroma_h = noise_reduction_strength(camera, analog_gain)
+        rgb8 = reduce_noise(rgb8, luma_h, chroma_h)
+    if isp.sharpening_amount > 0.0:
+        rgb8 = unsharp_mask(rgb8, isp.sharpening_amount, isp.sharpening_sigma_px)
     return ProcessedImage(rgb8, encode_jpeg(rgb8, camera), gains)
+
+
+def blend_highlights(rgb: NDArray[np.float32], clip: float = 1.0) -> NDArray[np.float32]:
+    """dcraw ``-H 2`` highlight blending, in place on white-balanced camera RGB (..., 3).
+
+    For each pixel with a channel above ``clip`` (relative units, 1 = the white level of a
+    channel of gain 1): opponent coordinates (L = R+G+B and two chroma axes) of the
+    unclipped value and of the value clipped at ``clip``; the unclipped chroma is scaled
+    to the clipped chroma's length and the pixel converted back (dcraw.c
+    ``blend_highlights``). Pixels with no channel above ``clip`` are untouched. Clipped
+    channels pull the pixel toward neutral at the unclipped lightness, so cores clipped
+    in two channels fade toward white; the output may exceed ``clip`` (clipped later).
+    """
+    flat = rgb.reshape(-1, 3)
+    hot = np.any(flat > clip, axis=1)
+    if not hot.any():
+        return rgb
+    cam0 = flat[hot].astype(np.float64)
+    lab0 = cam0 @ _BLEND_TRANS.T
+    lab1 = np.minimum(cam0, clip) @ _BLEND_TRANS.T
+    sum0 = np.sum(lab0[:, 1:] ** 2, axis=1)
+    sum1 = np.sum(lab1[:, 1:] ** 2, axis=1)
+    ratio = np.sqrt(np.divide(sum1, sum0, out=np.ones_like(sum0), where=sum0 > 0))
+    lab0[:, 1:] *= ratio[:, None]
+    flat[hot] = (lab0 @ _BLEND_ITRANS.T) / 3.0
+    return rgb
+
+
+def tone_curve(linear: NDArray[np.float64], name: str = "srgb", contrast: float = 0.0) -> NDArray[np.float64]:
+    """Encoded value in [0, 1] of linear values (clipped to [0, 1]) under the named tone curve.
+
+    ``srgb``: the sRGB encoding (IEC 61966-2-1, colour-science). ``picture-standard``:
+    y = (1 − c)·v + c·(3v² − 2v³) with v the sRGB value and c = ``contrast`` in [0, 1]:
+    0 → 0, 1 → 1, monotonic, mid-tone slope 1 + c/2, shadows and highlights compressed.
+    """
+    v = np.asarray(colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB"), dtype=np.float64)
+    if name == "srgb":
+        return v
+    if name == "picture-standard":
+        return (1.0 - contrast) * v + contrast * v * v * (3.0 - 2.0 * v)
+    raise ValueError(f"isp.tone_curve: expected one of {', '.join(TONE_CURVES)}, got {name!r}")
+
+
+_TONE_LUT_STEPS = 1 << 16
+
+
+@lru_cache(maxsize=8)
+def _tone_lut(name: str, contrast: float) -> NDArray[np.uint8]:
+    """8-bit codes of the tone curve at linear values k / 2¹⁶, k = 0…2¹⁶ (≤ 0.05 code per step)."""
+    x = np.arange(_TONE_LUT_STEPS + 1) / _TONE_LUT_STEPS
+    return np.rint(tone_curve(x, name, contrast) * 255.0).astype(np.uint8)
+
+
+def _apply_tone_lut(linear: NDArray[np.float32], lut: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    x = np.clip(linear, 0.0, 1.0, out=linear)
+    return lut[np.rint(x * _TONE_LUT_STEPS).astype(np.int32)]
+
+
+def noise_reduction_strength(camera: Camera, analog_gain: float) -> tuple[float, float]:
+    """(luma h, chroma hColor) of the non-local means filter at an analog gain, 8-bit code units.
+
+    Linear in log(gain) between the body's table points, held constant beyond its ends.
+    """
+    isp = camera.isp
+    lg = np.log(np.asarray(isp.nr_analog_gain, dtype=np.float64))
+    x = float(np.log(analog_gain))
+    return float(np.interp(x, lg, isp.nr_luma_h)), float(np.interp(x, lg, isp.nr_chroma_h))
+
+
+def reduce_noise(rgb8: NDArray[np.uint8], luma_h: float, chroma_h: float) -> NDArray[np.uint8]:
+    """Luma and chroma noise reduction of an RGB uint8 image by OpenCV's coloured non-local means.
+
+    ``cv2.fastNlMeansDenoisingColored`` converts to CIELAB and filters L with ``h`` =
+    ``luma_h`` and a, b with ``hColor`` = ``chroma_h`` (8-bit code units; larger removes
+    more noise and more detail), patch 7 px, search window 21 px.
+    """
+    bgr = np.ascontiguousarray(rgb8[..., ::-1])
+    out = cv2.fastNlMeansDenoisingColored(
+        bgr, None, float(luma_h), float(chroma_h), NLMEANS_TEMPLATE_PX, NLMEANS_SEARCH_PX
+    )
+    return np.ascontiguousarray(out[..., ::-1])
+
+
+def unsharp_mask(rgb8: NDArray[np.uint8], amount: float, sigma_px: float) -> NDArray[np.uint8]:
+    """Unsharp mask on luma: Y + amount·(Y − Gaussian(Y, sigma_px)) in YCbCr, chroma untouched (uint8 RGB)."""
+    ycc = cv2.cvtColor(np.ascontiguousarray(rgb8), cv2.COLOR_RGB2YCrCb)
+    y = np.ascontiguousarray(ycc[..., 0])
+    blurred = cv2.GaussianBlur(y, (0, 0), float(sigma_px))
+    ycc[..., 0] = cv2.addWeighted(y, 1.0 + float(amount), blurred, -float(amount), 0.0)
+    return cv2.cvtColor(ycc, cv2.COLOR_YCrCb2RGB)
 
 
 _LUT_BITS = 16

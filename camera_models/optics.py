@@ -11,6 +11,10 @@ camera equation
 
     E = π L T V(r) / (4 N²)        (irradiance on the sensor, W·m⁻²)
 
+Optional effects (:class:`camera_models.glare.OpticsEffects`, all off by default, which
+gives exactly the output of the plain path): defocus (a pillbox convolved into the PSF),
+then, on the summed camera-pixel image, the lens's veiling-glare tail and pixel crosstalk.
+
 where V is lensfun's measured relative illumination when the lens has lensfun data
 (it already contains the natural cos⁴ fall-off and mechanical vignetting, so no cos⁴θ
 is applied on top) and the lens's natural relative illumination cos θ · dΩ/dA
@@ -23,6 +27,7 @@ with the spectral integral done once per component, never per pixel.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -32,6 +37,16 @@ from numpy.typing import NDArray
 from scipy import ndimage, signal, special
 
 from camera_models.camera import Camera, LensModel
+from camera_models.glare import (
+    OpticsEffects,
+    apply_crosstalk,
+    apply_glare,
+    crosstalk_kernel,
+    defocus_blur_diameter_m,
+    pillbox_kernel,
+    tail_kernel,
+)
+from camera_models.sensor import cfa_channels
 from scenes import spectra
 from scenes.radiance import PixelGrid, SpectralRadiance
 
@@ -257,11 +272,16 @@ class OpticalImage:
         filter during the exposure (before noise and clipping).
     x0, y0
         Frame position of the crop's top-left pixel, camera pixels.
+    spilled_electrons_rgb
+        (3,) electrons per channel that the glare tail and crosstalk carried out of the
+        crop (so electrons_rgb.sum() + spilled = the total without them); None when
+        neither effect is on.
     """
 
     electrons_rgb: NDArray[np.float64]
     x0: int
     y0: int
+    spilled_electrons_rgb: NDArray[np.float64] | None = None
 
 
 def distortion_resample(image: NDArray[np.float32], grid: PixelGrid, camera: Camera) -> NDArray[np.float64]:
@@ -283,7 +303,12 @@ def distortion_resample(image: NDArray[np.float32], grid: PixelGrid, camera: Cam
 
 
 def optical_image(
-    radiance: SpectralRadiance, camera: Camera, exposure_s: float, f_number: float | None = None
+    radiance: SpectralRadiance,
+    camera: Camera,
+    exposure_s: float,
+    f_number: float | None = None,
+    *,
+    effects: OpticsEffects | None = None,
 ) -> OpticalImage:
     """Mean electrons per pixel and channel for a render seen through ``camera``'s lens.
 
@@ -297,11 +322,15 @@ def optical_image(
         Exposure time, s (> 0).
     f_number
         Working f-number; default the lens's.
+    effects
+        Defocus, veiling glare and pixel crosstalk to apply (default: none, the plain path).
     """
     if not math.isfinite(exposure_s) or exposure_s <= 0:
         raise ValueError(f"exposure_s: expected a time > 0 s, got {exposure_s!r}")
     n = camera.lens.f_number if f_number is None else check_f_number(f_number)
     grid = radiance.grid
+    effects = OpticsEffects() if effects is None else effects
+    defocus_subpx = _defocus_subpixels(radiance, camera, n, effects)
     factor = camera_equation_factor_m2_sr(camera.lens, n, camera.pixel_area_m2) * exposure_s
     u, v = grid.subpixel_centres_px()
     ri = None
@@ -319,25 +348,75 @@ def optical_image(
         if comp.unit_key is not None and comp.unit_image is not None:
             # linear in radiance: the lens's work on the unit render is done once and rescaled
             cache_key = (comp.unit_key, camera.name, n, grid)
+            if defocus_subpx > 0:  # the only effect applied per component (glare and crosstalk act on the sum)
+                cache_key += (("defocus_subpx", defocus_subpx),)
             binned = _UNIT_OPTICS.get(cache_key)
             if binned is None:
-                binned = _lens_image(comp.unit_image, comp.spectral_shape_per_nm, grid, camera, n, illumination())
+                binned = _lens_image(
+                    comp.unit_image, comp.spectral_shape_per_nm, grid, camera, n, illumination(), defocus_subpx
+                )
                 _UNIT_OPTICS[cache_key] = binned
                 while len(_UNIT_OPTICS) > 32:
                     _UNIT_OPTICS.pop(next(iter(_UNIT_OPTICS)))
             out += binned * (comp.scale * factor)
         else:
-            out += _lens_image(comp.image_W_m2_sr, comp.spectral_shape_per_nm, grid, camera, n, illumination()) * factor
-    return OpticalImage(out, grid.x0, grid.y0)
+            out += (
+                _lens_image(
+                    comp.image_W_m2_sr, comp.spectral_shape_per_nm, grid, camera, n, illumination(), defocus_subpx
+                )
+                * factor
+            )
+    if not (effects.glare or effects.crosstalk):
+        return OpticalImage(out, grid.x0, grid.y0)
+    spilled = np.zeros(3)
+    if effects.glare:
+        spread = camera.lens.glare
+        if spread is None:
+            raise ValueError(f"glare: camera {camera.name!r} has no [optics.glare] data")
+        tail, _ = _tail_kernel(spread, camera.geometry.pixel_pitch_um, int(effects.glare_radius_px))
+        for c in range(3):
+            out[..., c], spilled[c] = apply_glare(out[..., c], tail, spread.fraction)
+    if effects.crosstalk:
+        kernel = crosstalk_kernel(camera.lens.crosstalk_fraction, diagonal_share=camera.lens.crosstalk_diagonal_share)
+        cfa = cfa_channels(camera.sensor.cfa, grid.x0, grid.y0, grid.height, grid.width)
+        out, lost = apply_crosstalk(out, kernel, cfa)
+        spilled += lost
+    return OpticalImage(out, grid.x0, grid.y0, spilled)
+
+
+def _defocus_subpixels(radiance: SpectralRadiance, camera: Camera, n: float, effects: OpticsEffects) -> float:
+    """Defocus blur-circle diameter in rendered sub-pixels (0 when in focus or not asked for)."""
+    if effects.focus_distance_m is None:
+        return 0.0
+    d = effects.object_distance_m
+    if d is None:
+        d = (radiance.scenario or {}).get("range_m")
+    if d is None:
+        raise ValueError("object_distance_m: defocus needs the object's distance (none given, none in the render)")
+    pitch_m = camera.geometry.pixel_pitch_um * 1e-6
+    c_m = defocus_blur_diameter_m(
+        focal_length_m=camera.geometry.focal_length_px * pitch_m,
+        f_number=n,
+        focus_distance_m=effects.focus_distance_m,
+        object_distance_m=float(d),
+    )
+    diameter = c_m / pitch_m * radiance.grid.oversampling
+    return diameter if pillbox_kernel(diameter).size > 1 else 0.0
+
+
+@functools.lru_cache(maxsize=8)
+def _tail_kernel(spread, pixel_pitch_um: float, radius_px: int):
+    return tail_kernel(spread, pixel_pitch_um, max_radius_px=radius_px)
 
 
 _UNIT_OPTICS: dict[tuple, NDArray[np.float64]] = {}
 """Lens images of unit renders (see :func:`optical_image`), most recent 32."""
 
 
-def _lens_image(image, shape_per_nm, grid, camera: Camera, n: float, ri) -> NDArray[np.float64]:
-    """Distortion, PSF per channel, relative illumination and binning of one radiance
-    image: (height, width, 3) electrons per pixel per unit of the camera-equation factor."""
+def _lens_image(image, shape_per_nm, grid, camera: Camera, n: float, ri, defocus_subpx: float = 0.0):
+    """Distortion, PSF per channel (with a defocus pillbox of ``defocus_subpx`` sub-pixels'
+    diameter when > 0), relative illumination and binning of one radiance image:
+    (height, width, 3) electrons per pixel per unit of the camera-equation factor."""
     s = grid.oversampling
     qe = camera.sensor.qe_rgb
     image = distortion_resample(image, grid, camera)
@@ -345,7 +424,11 @@ def _lens_image(image, shape_per_nm, grid, camera: Camera, n: float, ri) -> NDAr
     out = np.empty((grid.height, grid.width, 3))
     for c in range(3):
         weight = shape_per_nm * qe[c] * spectra.WAVELENGTHS_NM
-        blurred = signal.fftconvolve(image, psf_kernel(camera, n, weight, s), mode="same")
+        psf = psf_kernel(camera, n, weight, s)
+        if defocus_subpx > 0:
+            psf = signal.fftconvolve(psf, pillbox_kernel(defocus_subpx), mode="full")
+            psf = np.clip(psf, 0.0, None) / np.clip(psf, 0.0, None).sum()
+        blurred = signal.fftconvolve(image, psf, mode="same")
         out[..., c] = (np.clip(blurred, 0.0, None) * ri).reshape(grid.height, s, grid.width, s).mean(axis=(1, 3))
         out[..., c] *= e_per_j[c]
     return out

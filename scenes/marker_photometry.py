@@ -20,6 +20,7 @@ import numpy as np
 from scenes import spectra
 from scenes.near_field import NearFieldSettings, exit_spectral_factor, marker_emission
 from scenes.radiance import SpectralRadiance
+from scenes.render import render
 from scenes.scenario import Scenario
 from scenes.view import project
 
@@ -72,3 +73,13 @@ def marker_figures(scenario: Scenario, radiance: SpectralRadiance | None = None)
             )
         out.append(row)
     return out
+
+
+def side_to_centre_flux(scenario: Scenario, cache=None) -> float:
+    """Mean irradiance at the camera's pupil from markers 2-5 over that from marker 1
+    (dimensionless), measured on the render of the scenario's side (its LEDs only)."""
+    radiance = render(scenario, cache, groups=[f"led:{scenario.side}"])
+    uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
+    spacing = min(np.hypot(*(uv[i] - uv[j])) for i in range(5) for j in range(i + 1, 5))
+    flux = [radiance.irradiance_at_pupil_W_m2(u, v, 0.45 * spacing, f"led:{scenario.side}") for u, v in uv]
+    return float(np.mean(flux[1:]) / flux[0])

@@ -7,16 +7,24 @@ and camera settings (T6 ISO 6400, 1/60 s; webcams automatic):
   (V1: the first build, whose 90 mm cross fits the webcam's 136 mm field at 150 mm —
   V2's 140 mm cross does not);
 * range test: C270 and T6 + 18 mm at 2, 5, 7 and 10 m, room lights on and off, V1 and V2;
-* primary test: V2, T6 with the 18 mm and 10 mm lenses, 1-5 m × 0-30° yaw, lights off.
+* primary test: V2, T6 with the 18 mm and 10 mm lenses, 1-5 m × 0-30° yaw, lights off;
+* weight experiment: T6 + 18 mm at 1 m, QUEST with equal weights (0.25 each) and the tuned
+  (0.05, 0.05, 0.45, 0.45), each without rectification and rectified with alpha 0 and 1;
+* V1 vs V2: the side-to-centre marker flux ratio at 2 m (``v1_vs_v2.csv``).
+
+Frames are the camera's whole saved frame (``full_frame``), which the study's tracker scales
+to 50 % (the T6) as the study processed them: every false blob a frame holds is there.
 
 Markers as built: foam + one sheet of matched paper; the dimmer's setting is unknown, so
 the LEDs run at the datasheet current. Red side unless the test says each colour.
-``validation.csv`` has one row per tested condition (means over seeds); the report marks
-the study's headline conclusions agree/disagree from those rows.
+``validation.csv`` has one row per tested condition (means over seeds, with the lowest and
+highest value seen over the seeds: ``detected_low``/``high`` a Wilson 95 % interval); the
+report marks the study's headline conclusions agree/disagree from those rows.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -24,8 +32,11 @@ import numpy as np
 import pandas as pd
 
 from pipeline.thesis_tracker import ThesisTrackerSettings, derive_hsv_ranges
-from scenes.render_cache import atomic_write_bytes
+from scenes.marker_photometry import side_to_centre_flux
+from scenes.render_cache import RenderCache, atomic_write_bytes
+from scenes.scenario import RenderSettings, Scenario
 from studies.engine.frame import capture_frame
+from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
@@ -58,13 +69,13 @@ def test_conditions(quick: bool) -> list[tuple[str, dict]]:
     for cam in ("logitech-c270", "canon-t6-18mm"):
         for beacon in ("v2",) if quick else ("v1", "v2"):
             for env in ("dark-room",) if quick else ("dark-room", "lit-room"):
-                for r in (2.0, 5.0, 7.0, 10.0):
+                for r, side in itertools.product((2.0, 5.0, 7.0, 10.0), ("red",) if quick else sides):
                     out.append(
                         (
                             "range",
                             {
                                 "beacon": beacon,
-                                "side": "red",
+                                "side": side,
                                 "range_m": r,
                                 "yaw_deg": 0.0,
                                 "camera": cam,
@@ -92,7 +103,13 @@ def test_conditions(quick: bool) -> list[tuple[str, dict]]:
                         },
                     )
                 )
+    weights = {"beacon": "v2", "side": "red", "range_m": 1.0, "yaw_deg": 0.0, "camera": "canon-t6-18mm"}
+    out.append(("weights", {**weights, "environment": "dark-room", **AS_BUILT}))
     return out
+
+
+WEIGHT_VARIANTS = tuple(itertools.product(("tuned", "equal"), (None, {"alpha": 0.0}, {"alpha": 1.0})))
+"""The weight experiment's detector settings: QUEST weights × rectification (none, alpha 0, alpha 1)."""
 
 
 def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int | None = None) -> list[dict]:
@@ -113,23 +130,34 @@ def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int |
     def tasks_for(tests: set[str], variants: dict | None) -> list[dict]:
         tasks = []
         for test, cond in pairs:
-            if test in tests:
-                for t in frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]):
-                    t["tags"] = {"test": test}
-                    if variants:
-                        t["thesis_hsv_variants"] = variants
-                    tasks.append(t)
+            if test not in tests:
+                continue
+            for t in frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]):
+                t["full_frame"] = True  # the whole saved frame, as the study processed it
+                if variants:
+                    t["thesis_hsv_variants"] = variants
+                settings = WEIGHT_VARIANTS if test == "weights" else (("tuned", None),)
+                for weights, rectification in settings:
+                    label = "none" if rectification is None else f"alpha {rectification['alpha']:g}"
+                    task = {**t, "tags": {"test": test, "weights": weights, "rectification": label}}
+                    if weights != "tuned":
+                        task["quest_weights"] = weights
+                    if rectification is not None:
+                        task["rectification"] = rectification
+                    tasks.append(task)
         return tasks
 
     preliminary = tasks_for({"preliminary"}, None)
     rows = run_frames(preliminary, out, execution, description=f"{NAME} preliminary")
     derived = derive_thresholds(preliminary)
     atomic_write_bytes(out / "derived_thresholds.json", json.dumps(derived, indent=1).encode())
-    later = tasks_for({"range", "primary"}, {"study": None, "derived": derived})
-    rows += run_frames(later, out, execution, description=f"{NAME} range + primary")
+    later = tasks_for({"range", "primary", "weights"}, {"study": None, "derived": derived})
+    rows += run_frames(later, out, execution, description=f"{NAME} range, primary, weights")
     frame = write_tables(out, rows)
     table = validation_table(frame)
     atomic_write_bytes(out / "validation.csv", table.to_csv(index=False, float_format="%.6g").encode())
+    flux = v1_vs_v2(options.render)
+    atomic_write_bytes(out / "v1_vs_v2.csv", flux.to_csv(index=False, float_format="%.6g").encode())
 
     study_boxes = {c: [[list(lo), list(hi)] for lo, hi in b] for c, b in ThesisTrackerSettings().ranges().items()}
     verdicts = [
@@ -159,7 +187,10 @@ def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
 def validation_table(frame):
     """One row per tested condition (means over seeds)."""
 
-    keys = ["test", "thresholds", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg"]
+    keys = [
+        "test", "thresholds", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg",
+        "weights", "rectification",
+    ]  # fmt: skip
     out = []
     for key, g in frame.groupby(keys, sort=False):
         rec = dict(zip(keys, key, strict=True))
@@ -184,9 +215,38 @@ def validation_table(frame):
                 "yaw_est_deg": float(np.nanmean(g.yaw_est_deg)) if g.yaw_est_deg.notna().any() else np.nan,
                 "core_saturation": float(np.nanmean(g.core_saturated_fraction_mean)),
                 "thresholds": rec["thresholds"],
+                "weights": rec["weights"],
+                "rectification": rec["rectification"],
+                **_intervals(detected, g),
             }
         )
     return pd.DataFrame(out)
+
+
+def _intervals(detected: list[bool], g) -> dict:
+    """The evidence behind a condition's means: a Wilson 95 % interval of the detected
+    fraction, and the lowest and highest range and yaw estimate over its frames."""
+    _, low, high = wilson_interval(int(sum(detected)), len(detected))
+    out = {"detected_low": low, "detected_high": high}
+    for name in ("yaw_est", "range_est"):
+        column = g[f"{name}_deg" if name == "yaw_est" else f"{name}_m"].dropna()
+        out[f"{name}_low"] = float(column.min()) if len(column) else np.nan
+        out[f"{name}_high"] = float(column.max()) if len(column) else np.nan
+    return out
+
+
+def v1_vs_v2(render: dict) -> pd.DataFrame:
+    """Side-to-centre marker flux ratio of each beacon as built (T6 + 18 mm, 2 m, yaw 0, red,
+    foam + 1 matched sheet): the mean irradiance at the pupil from markers 2-5 over marker 1's
+    (:func:`scenes.marker_photometry.side_to_centre_flux`)."""
+    rows = []
+    for beacon in ("v1", "v2"):
+        scenario = Scenario(
+            beacon=beacon, side="red", range_m=2.0, yaw_deg=0.0, camera="canon-t6-18mm", environment="dark-room",
+            foam=True, paper_sheets=1, paper_colour="matched", render=RenderSettings(**render),
+        )  # fmt: skip
+        rows.append({"beacon": beacon, "side_to_centre_flux": side_to_centre_flux(scenario, RenderCache())})
+    return pd.DataFrame(rows)
 
 
 def overlapping_colours(hsv: dict) -> list[str]:
@@ -222,7 +282,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
             {
                 "thresholds": thresholds,
                 "conclusion": claim,
-                "simulation": "agree" if ok else "disagree",
+                "simulation": "no evidence" if ok is None else ("agree" if ok else "disagree"),
                 "evidence": evidence,
             }
         )
@@ -276,6 +336,16 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "QUEST attitude degrades at longer range",
         bool(np.isfinite(e1) and np.isfinite(e5) and e5 > e1),
         f"mean |yaw error| {e1:.2f}° at 1 m vs {e5:.2f}° at 5 m",
+    )
+    weighted = frame[(frame.test == "weights") & (frame.rectification == "none") & frame.detected]
+    errors = {w: np.abs(weighted[weighted.weights == w].yaw_err_deg).mean() for w in ("tuned", "equal")}
+    testable = all(np.isfinite(e) for e in errors.values())
+    verdict(
+        "Tuning the QUEST weights to (0.05, 0.05, 0.45, 0.45) improved the attitude over equal weights",
+        bool(errors["tuned"] < errors["equal"]) if testable else None,
+        f"mean |yaw error| at 1 m: tuned {errors['tuned']:.2f}°, equal {errors['equal']:.2f}°"
+        if testable
+        else "no detections at 1 m to compare the weights on",
     )
     return out
 

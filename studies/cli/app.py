@@ -17,10 +17,10 @@ from typing import Annotated
 import typer
 from rich.logging import RichHandler
 
-from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study
+from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study, unknowns
 from studies.cli.common import console
 
-COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks)
+COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
 
 app = typer.Typer(

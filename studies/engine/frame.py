@@ -17,6 +17,9 @@ worker process or a Dask cluster):
 ``align_px``   optional: pad the rendered crop with zero radiance so its origin and size are
                multiples of this (JPEG blocks and the study's 50 % resize then group the
                pixels as in the full frame)
+``camera_overrides``  optional: camera-model fields to replace, ``{"lens.f_number": 5.6}``
+               (:func:`camera_models.camera.with_overrides`; e.g. from :func:`studies.engine.unknowns.apply`);
+               rows then carry them as ``camera.<path>`` columns
 
 :func:`capture_frame` is the one render → capture path: it returns what the camera saved
 (:class:`CapturedFrame`), which experiments measure directly (e.g. core saturation).
@@ -37,7 +40,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.camera import Camera, load_camera
+from camera_models.camera import Camera, load_camera, with_overrides
 from camera_models.capture import Capture, capture, marker_core_saturation, marker_pixels
 from camera_models.exposure import manual_exposure
 from camera_models.rectification import opencv_distortion
@@ -124,6 +127,7 @@ def simulate_frame(task: dict) -> list[dict]:
     base = {
         **{k: v for k, v in task["scenario"].items()},
         **task.get("tags", {}),
+        **{f"camera.{path}": value for path, value in (task.get("camera_overrides") or {}).items()},
         "seed": int(task["seed"]),
         "nominal_range_m": task.get("nominal", {}).get("range_m", scenario.range_m),
         "nominal_yaw_deg": task.get("nominal", {}).get("yaw_deg", scenario.yaw_deg),
@@ -275,7 +279,7 @@ def frame_inputs(task: dict):
     of reading the cache again — light transport is linear, the bytes are the same.
     """
     scenario = frame_scenario(task)
-    camera = load_camera(scenario.camera)
+    camera = camera_with_overrides(load_camera(scenario.camera), task.get("camera_overrides"))
     needs_background = camera.exposure.mode == "auto" or bool(task.get("full_frame"))
     key = json.dumps({**scenario.to_dict(), "led_current_mA": None, "background": needs_background}, sort_keys=True)
     held = _RENDERS.pop(key, None)
@@ -289,6 +293,18 @@ def frame_inputs(task: dict):
     if task.get("align_px"):
         radiance = aligned_radiance(radiance, int(task["align_px"]))
     return scenario, camera, radiance, background
+
+
+def camera_with_overrides(camera: Camera, overrides: dict | None) -> Camera:
+    """``camera`` with a task's ``camera_overrides`` applied (the same object when there are none).
+
+    The geometry cannot be overridden: the render is made on the camera's own pixel grid."""
+    if not overrides:
+        return camera
+    for path in overrides:
+        if str(path).split(".")[0] == "geometry":
+            raise ValueError(f"camera override {path!r}: the geometry is fixed by the camera name (the render uses it)")
+    return with_overrides(camera, overrides)
 
 
 def aligned_radiance(radiance: SpectralRadiance, align: int) -> SpectralRadiance:

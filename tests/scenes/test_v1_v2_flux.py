@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scenes.marker_photometry import side_to_centre_flux
 from scenes.render import render
 from scenes.scenario import RenderSettings, Scenario
 from scenes.view import project
@@ -42,3 +43,17 @@ def test_v1_side_markers_are_far_dimmer_than_v2s():
     assert np.all(v2 > 0.9)
     # V1's in-plane LEDs point along their arms: the camera sees only stray light
     assert np.all(v1 < 1e-3 * v2)
+
+
+def test_side_to_centre_flux_is_the_mean_of_the_rendered_ratios():
+    """The validate table's figure: V2's mean side/centre ratio follows cos^m θ / d² (as above)
+    and V1's side markers (LEDs along their arms) are dark from the front."""
+    v2 = Scenario(
+        beacon="v2", side="red", range_m=2.0, yaw_deg=0.0, render=RenderSettings(spp=16, oversampling=1, crop="target")
+    )
+    ratios, _ = side_to_centre_flux_ratios("v2")
+    assert side_to_centre_flux(v2) == pytest.approx(float(np.mean(ratios)), rel=0.02)
+    v1 = Scenario(
+        beacon="v1", side="red", range_m=2.0, yaw_deg=0.0, render=RenderSettings(spp=16, oversampling=1, crop="target")
+    )
+    assert side_to_centre_flux(v1) < 1e-3

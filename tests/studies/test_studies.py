@@ -77,6 +77,7 @@ def test_validate_tiny(tmp_path, monkeypatch):
     subset = [next(p for p in pairs if p[0] == "preliminary" and p[1]["side"] == "red")]
     subset += [next(p for p in pairs if p[0] == "range" and p[1]["range_m"] == 10.0)]
     subset += [next(p for p in pairs if p[0] == "primary")]
+    subset += [next(p for p in pairs if p[0] == "weights")]
     monkeypatch.setattr(validate, "test_conditions", lambda quick: subset)
     monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
     rows = validate.run(tmp_path, True, Execution(workers=1), seeds=1)
@@ -95,14 +96,29 @@ def test_validate_tiny(tmp_path, monkeypatch):
         "range_est_m",
         "yaw_est_deg",
     ]
-    # the preliminary test once; the later tests with the study's and the derived thresholds
-    assert len(rows) == len(table) == 1 + 2 * 2
+    assert list(table.columns[12:]) == [
+        "core_saturation", "thresholds", "weights", "rectification", "detected_low", "detected_high",
+        "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high",
+    ]  # fmt: skip
+    assert (table.detected_low <= table.detected_fraction).all() and (
+        table.detected_fraction <= table.detected_high
+    ).all()
+    # the preliminary test once; the later tests with the study's and the derived thresholds; the weight
+    # experiment as 2 weight sets × 3 rectifications
+    assert len(rows) == len(table) == 1 + 2 * 2 + 2 * 6
+    weights = table[table.test == "weights"]
+    assert set(zip(weights.weights, weights.rectification, strict=True)) == {
+        (w, r) for w in ("tuned", "equal") for r in ("none", "alpha 0", "alpha 1")
+    }
+    flux = pd.read_csv(tmp_path / "v1_vs_v2.csv")
+    assert list(flux.beacon) == ["v1", "v2"] and flux.side_to_centre_flux[0] < 0.01 < 0.5 < flux.side_to_centre_flux[1]
     assert set(table.thresholds) == {"study", "derived"}
     derived = json.loads((tmp_path / "derived_thresholds.json").read_text())
     assert derived["red"] and not derived["blue"]  # only red was captured here
     verdicts = json.loads((tmp_path / "summary.json").read_text())["conclusions"]
     assert {v["thresholds"] for v in verdicts} == {"study", "derived"}
-    assert all(v["simulation"] in ("agree", "disagree") for v in verdicts)
+    assert all(v["simulation"] in ("agree", "disagree", "no evidence") for v in verdicts)
+    assert any("QUEST weights" in v["conclusion"] for v in verdicts)
 
 
 def _tiny_options(**kw):

@@ -1,0 +1,338 @@
+"""Unknowns: the inputs the source study did not give, as one registry (``studies/data/unknowns.toml``).
+
+Each :class:`Unknown` names where it applies (its ``target``), how it may vary (``kind`` with
+bounds or choices), its ``nominal`` value and the ``source`` or ``assumed`` reasoning. Any run
+can hold them at their nominal values (:func:`nominal`), fix some (:func:`fixed`) or sample
+them (:func:`sample`, quasi-random with :mod:`scipy.stats.qmc`), then turn one set of values
+into a frame task (:func:`apply`):
+
+``scenario.<field>``                      → ``task["scenario"][field]``
+``camera.<lens|sensor|isp|exposure>.<f>`` → ``task["camera_overrides"]["<group>.<f>"]``
+                                            (applied by :func:`camera_models.camera.with_overrides`)
+``data.<file>.<key path>``                → a value of ``scenes/data/<file>.toml`` the frame path cannot
+                                            set per task yet: only its nominal (the file's value) is accepted
+
+Values are keyed by the unknown's name. All functions are pure; the same seed gives the
+same samples.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import tomllib
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.stats import loguniform, qmc, uniform
+
+from scenes.scenario import Scenario
+from scenes.sourced import DATA_DIR as SCENE_DATA_DIR
+from scenes.sourced import DataFileError, load_sourced
+from scenes.view import camera_names
+
+UNKNOWNS_FILE = Path(__file__).resolve().parents[1] / "data" / "unknowns.toml"
+KINDS = ("uniform", "loguniform", "choice", "fixed")
+CAMERA_GROUPS = ("lens", "sensor", "isp", "exposure")
+"""Camera-model parts a run may override (the geometry is fixed by the camera name: the render uses it)."""
+METHODS = ("sobol", "lhs", "random")
+_KEYS = {"target", "kind", "low", "high", "choices", "nominal", "unit", "cameras", "source", "assumed"}
+
+
+@dataclass(frozen=True)
+class Unknown:
+    """One unknown input.
+
+    Attributes
+    ----------
+    name
+        Table name in the data file (a Python identifier).
+    target
+        Where it applies: ``scenario.<field>``, ``camera.<group>.<field>`` or ``data.<file>.<key path>``.
+    kind
+        ``uniform``, ``loguniform``, ``choice`` or ``fixed``.
+    nominal
+        Value of a nominal run, in ``unit``.
+    low, high
+        Bounds of ``uniform`` / ``loguniform`` (inclusive), in ``unit``; None otherwise.
+    choices
+        Values of ``choice``; empty otherwise.
+    unit
+        Unit of the values (empty if dimensionless or not a number).
+    cameras
+        Camera names it applies to; empty means every camera.
+    provenance
+        ``"source: …"`` or ``"assumed: …"``: where the range comes from, or why it is reasonable.
+    """
+
+    name: str
+    target: str
+    kind: str
+    nominal: Any
+    low: float | None = None
+    high: float | None = None
+    choices: tuple = ()
+    unit: str = ""
+    cameras: tuple[str, ...] = ()
+    provenance: str = ""
+
+    @property
+    def namespace(self) -> str:
+        """``scenario``, ``camera`` or ``data``."""
+        return self.target.split(".", 1)[0]
+
+    @property
+    def path(self) -> str:
+        """The target without its namespace (``led_current_mA``, ``lens.f_number``, ``leds.red.…``)."""
+        return self.target.split(".", 1)[1]
+
+    def contains(self, value: Any) -> bool:
+        """Whether ``value`` is a value this unknown may take."""
+        if self.kind == "choice":
+            return any(_same(value, c) for c in self.choices)
+        if self.kind == "fixed":
+            return _same(value, self.nominal)
+        return _is_number(value) and self.low <= float(value) <= self.high
+
+    def describe_range(self) -> str:
+        """The range as text: ``0.05-20 mA (loguniform)``, ``black | white``, ``= 3.5``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.kind == "choice":
+            return " | ".join(_text(c) for c in self.choices)
+        if self.kind == "fixed":
+            return f"= {_text(self.nominal)}{unit}"
+        return f"{self.low:g}-{self.high:g}{unit} ({self.kind})"
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(float(x))
+
+
+def _same(a: Any, b: Any) -> bool:
+    if _is_number(a) and _is_number(b):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=0.0)
+    return type(a) is type(b) and a == b
+
+
+def _text(x: Any) -> str:
+    return f"{x:g}" if _is_number(x) else str(x).lower() if isinstance(x, bool) else str(x)
+
+
+def _parse(name: str, table: Any, where: str) -> Unknown:
+    """One table of the data file as an :class:`Unknown`; :class:`DataFileError` naming the field."""
+    at = f"{where}: {name}"
+    if not isinstance(table, dict):
+        raise DataFileError(f"{at}: expected a table")
+    if not name.isidentifier():
+        raise DataFileError(f"{at}: the name must be a Python identifier (letters, digits, _)")
+    extra = sorted(set(table) - _KEYS)
+    if extra:
+        raise DataFileError(f"{at}.{extra[0]}: unknown key (expected some of {', '.join(sorted(_KEYS))})")
+    has = [k for k in ("source", "assumed") if k in table]
+    if len(has) != 1 or not isinstance(table[has[0]], str) or len(table[has[0]].strip()) < 20:
+        raise DataFileError(f"{at}: needs exactly one of 'source' or 'assumed' with the reasoning (a sentence)")
+    for key in ("target", "kind", "nominal"):
+        if key not in table:
+            raise DataFileError(f"{at}.{key}: missing")
+    kind = table["kind"]
+    if kind not in KINDS:
+        raise DataFileError(f"{at}.kind: expected one of {', '.join(KINDS)}, got {kind!r}")
+    _check_target(table["target"], f"{at}.target")
+    cameras = table.get("cameras", [])
+    if not isinstance(cameras, list) or any(c not in camera_names() for c in cameras):
+        raise DataFileError(f"{at}.cameras: expected a list of camera names ({', '.join(camera_names())})")
+    if not isinstance(table.get("unit", ""), str):
+        raise DataFileError(f"{at}.unit: expected a string")
+    low = high = None
+    choices: tuple = ()
+    if kind in ("uniform", "loguniform"):
+        low, high = table.get("low"), table.get("high")
+        if not (_is_number(low) and _is_number(high) and low < high):
+            raise DataFileError(f"{at}.low/high: expected finite numbers with low < high, got {low!r}, {high!r}")
+        if kind == "loguniform" and low <= 0:
+            raise DataFileError(f"{at}.low: a loguniform range needs low > 0, got {low!r}")
+        low, high = float(low), float(high)
+    elif kind == "choice":
+        choices = tuple(table.get("choices") or ())
+        if len(choices) < 2:
+            raise DataFileError(f"{at}.choices: expected a list of at least 2 values")
+    else:
+        for key in ("low", "high", "choices"):
+            if key in table:
+                raise DataFileError(f"{at}.{key}: a fixed unknown has only a nominal value")
+    unknown = Unknown(
+        name=name,
+        target=table["target"],
+        kind=kind,
+        nominal=float(table["nominal"]) if kind != "choice" and _is_number(table["nominal"]) else table["nominal"],
+        low=low,
+        high=high,
+        choices=choices,
+        unit=table.get("unit", ""),
+        cameras=tuple(cameras),
+        provenance=f"{has[0]}: {table[has[0]]}",
+    )
+    if not unknown.contains(unknown.nominal):
+        raise DataFileError(f"{at}.nominal: {unknown.nominal!r} is outside {unknown.describe_range()}")
+    if unknown.namespace == "data" and not _same(data_file_value(unknown.target), unknown.nominal):
+        raise DataFileError(
+            f"{at}.nominal: {unknown.nominal!r} differs from the data file's {data_file_value(unknown.target)!r}"
+        )
+    return unknown
+
+
+def _check_target(target: Any, at: str) -> None:
+    if not isinstance(target, str) or "." not in target:
+        raise DataFileError(f"{at}: expected 'scenario.<field>', 'camera.<group>.<field>' or 'data.<file>.<key>'")
+    namespace, path = target.split(".", 1)
+    if namespace == "scenario":
+        fields = [f.name for f in dataclasses.fields(Scenario) if f.name != "render"]
+        if path not in fields:
+            raise DataFileError(f"{at}: {path!r} is not a Scenario field (expected one of {', '.join(fields)})")
+    elif namespace == "camera":
+        group, _, field = path.partition(".")
+        if group not in CAMERA_GROUPS or not field:
+            raise DataFileError(f"{at}: expected camera.<{'|'.join(CAMERA_GROUPS)}>.<field>, got {target!r}")
+    elif namespace == "data":
+        try:
+            data_file_value(target)
+        except (KeyError, TypeError, DataFileError):
+            raise DataFileError(f"{at}: {target!r} is not a value of a scenes/data file") from None
+    else:
+        raise DataFileError(f"{at}: namespace must be 'scenario', 'camera' or 'data', got {namespace!r}")
+
+
+def data_file_value(target: str) -> Any:
+    """The value a ``data.<file>.<key path>`` target has in ``scenes/data/<file>.toml`` (KeyError if absent)."""
+    _, file, *keys = target.split(".")
+    node = _scene_data(file)
+    for key in keys:
+        node = node[key]
+    return node
+
+
+@lru_cache(maxsize=16)
+def _scene_data(file: str) -> dict:
+    path = SCENE_DATA_DIR / f"{file}.toml"
+    if not file.isidentifier() or not path.is_file():
+        raise DataFileError(f"{path}: no such scene data file")
+    return load_sourced(path)[0]
+
+
+def load_unknowns(path: str | Path = UNKNOWNS_FILE) -> dict[str, Unknown]:
+    """The registry: name → :class:`Unknown`, in file order, validated (:class:`DataFileError`, one line
+    naming the file and the field)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise DataFileError(f"{path}: cannot read data file ({str(exc).splitlines()[0]})") from exc
+    if not raw:
+        raise DataFileError(f"{path}: no unknowns")
+    return {name: _parse(name, table, str(path)) for name, table in raw.items()}
+
+
+def nominal(unknowns: dict[str, Unknown]) -> dict[str, Any]:
+    """Every unknown at its nominal value (name → value)."""
+    return {name: u.nominal for name, u in unknowns.items()}
+
+
+def fixed(unknowns: dict[str, Unknown], **values: Any) -> dict[str, Unknown]:
+    """A new registry with the named unknowns fixed at the given values (each within its range)."""
+    out = dict(unknowns)
+    for name, value in values.items():
+        if name not in unknowns:
+            raise ValueError(f"unknowns: no unknown {name!r} (expected one of {', '.join(unknowns)})")
+        u = unknowns[name]
+        if not u.contains(value):
+            raise ValueError(f"unknowns: {name}={value!r} is outside {u.describe_range()}")
+        value = float(value) if _is_number(value) and u.kind != "choice" else value
+        out[name] = dataclasses.replace(u, kind="fixed", nominal=value, low=None, high=None, choices=())
+    return out
+
+
+def sample(unknowns: dict[str, Unknown], n: int, seed: int, method: str = "sobol") -> list[dict[str, Any]]:
+    """``n`` sets of values (name → value) for the unknowns; fixed ones stay at their nominal.
+
+    ``method``: ``sobol`` (scrambled Sobol' sequence; powers of 2 keep its balance), ``lhs``
+    (Latin hypercube) or ``random`` (independent uniform draws). Each varying unknown takes
+    one dimension of the unit hypercube, mapped by its distribution's inverse CDF
+    (:mod:`scipy.stats`); a choice takes equal shares of it. Same seed, same samples.
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n: expected an integer >= 1, got {n!r}")
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    varying = [u for u in unknowns.values() if u.kind != "fixed"]
+    d = len(varying)
+    if d == 0:
+        points = np.zeros((n, 0))
+    elif method == "sobol":
+        with warnings.catch_warnings():  # n not a power of 2: still valid points, slightly less balanced
+            warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
+            points = qmc.Sobol(d, scramble=True, seed=seed).random(n)
+    elif method == "lhs":
+        points = qmc.LatinHypercube(d, seed=seed).random(n)
+    else:
+        points = np.random.default_rng(seed).random((n, d))
+    columns = {u.name: _from_unit(u, points[:, j]) for j, u in enumerate(varying)}
+    return [
+        {name: columns[name][i] if name in columns else u.nominal for name, u in unknowns.items()} for i in range(n)
+    ]
+
+
+def _from_unit(u: Unknown, q: np.ndarray) -> list:
+    """Values of ``u`` at unit-interval quantiles ``q`` (plain Python values)."""
+    if u.kind == "choice":
+        index = np.minimum((q * len(u.choices)).astype(int), len(u.choices) - 1)
+        return [u.choices[i] for i in index]
+    if u.kind == "uniform":
+        x = uniform(loc=u.low, scale=u.high - u.low).ppf(q)
+    else:
+        x = loguniform(u.low, u.high).ppf(q)
+    return [float(v) for v in np.clip(x, u.low, u.high)]
+
+
+def apply(task: dict, values: dict[str, Any], unknowns: dict[str, Unknown] | None = None) -> dict:
+    """A new frame task (see :mod:`studies.engine.frame`) with ``values`` (name → value) set.
+
+    Scenario targets go into ``task["scenario"]``, camera targets into
+    ``task["camera_overrides"]`` (``"lens.f_number"`` → value). Unknowns scoped to other
+    cameras than the task's are skipped. A ``data.`` target cannot be set per task yet: its
+    nominal (the data file's value) is accepted and changes nothing, any other value raises
+    ``ValueError``. ``task`` itself is left unchanged.
+    """
+    unknowns = load_unknowns() if unknowns is None else unknowns
+    out = copy.deepcopy(task)
+    scenario = out.setdefault("scenario", {})
+    camera = scenario.get("camera", Scenario.__dataclass_fields__["camera"].default)
+    overrides = dict(out.get("camera_overrides") or {})
+    for name, value in values.items():
+        if name not in unknowns:
+            raise ValueError(f"unknowns: no unknown {name!r} (expected one of {', '.join(unknowns)})")
+        u = unknowns[name]
+        if u.cameras and camera not in u.cameras:
+            continue
+        value = value.item() if isinstance(value, np.generic) else value
+        if u.namespace == "scenario":
+            scenario[u.path] = value
+        elif u.namespace == "camera":
+            overrides[u.path] = value
+        elif not _same(value, data_file_value(u.target)):
+            raise ValueError(
+                f"unknowns: {name} ({u.target}) is a data-file value the frame path cannot set per task yet; "
+                f"hold it at {data_file_value(u.target)!r} (fixed/nominal) or leave it out, got {value!r}"
+            )
+    if overrides:
+        out["camera_overrides"] = overrides
+    return out
+
+
+def settable(unknowns: dict[str, Unknown]) -> dict[str, Unknown]:
+    """The unknowns a frame task can take today (scenario and camera targets, not ``data.`` ones)."""
+    return {name: u for name, u in unknowns.items() if u.namespace != "data"}

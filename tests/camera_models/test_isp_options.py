@@ -1,0 +1,202 @@
+"""ISP stage options: legacy bytes, noise reduction, highlight handling, tone curve, sharpening."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+
+import colour
+import cv2
+import numpy as np
+import pytest
+
+from camera_models.camera import BODY_DIR, load_camera
+from camera_models.isp import (
+    camera_to_srgb_matrix,
+    check_isp_options,
+    daylight_gains,
+    demosaic,
+    encode_jpeg,
+    noise_reduction_strength,
+    process,
+    reduce_noise,
+    srgb_encode_8bit,
+    tone_curve,
+    unsharp_mask,
+)
+from scenes.sourced import load_sourced
+
+# sha256 of (rgb8, jpeg) from process() as it was before the stage options existed, on the mosaic
+# of _seeded_raw (captured by running the old code; they depend on the body data and OpenCV's libjpeg)
+LEGACY_SHA256 = {
+    ("canon-t6-18mm", 0, 0): ("7ae1f7342b10dbd0", "794e6c8b6ea317ab"),
+    ("canon-t6-18mm", 3, 1): ("94f9af8fea310942", "c6121aa505f27eaa"),
+    ("logitech-c270", 0, 0): ("205b63025aba7f48", "f1ff350cd14cc11c"),
+    ("logitech-c270", 3, 1): ("c294b199dd38d9a0", "c785c9f4d3d283a4"),
+    ("spedal-920", 0, 0): ("3a99602bf50966a1", "971057c2a2c6bdba"),
+    ("spedal-920", 3, 1): ("0e847c76e97f78e3", "db3b322b2b079abb"),
+}
+
+
+def _seeded_raw(cam) -> np.ndarray:
+    s = cam.sensor
+    rng = np.random.default_rng(20240611)
+    raw = rng.integers(int(s.black_level_DN) - 50, int(s.white_level_DN) + 1, size=(300, 64))
+    return raw.clip(0, 2**s.adc_bits - 1).astype(np.uint16)
+
+
+def _with(cam, **isp):
+    return dataclasses.replace(cam, isp=dataclasses.replace(cam.isp, **isp))
+
+
+def _hsv(rgb):
+    return cv2.cvtColor(np.asarray(rgb, np.uint8).reshape(1, 1, 3)[..., ::-1].copy(), cv2.COLOR_BGR2HSV)[0, 0]
+
+
+@pytest.mark.parametrize(("name", "x0", "y0"), list(LEGACY_SHA256))
+def test_legacy_is_the_default_and_reproduces_old_bytes(name, x0, y0):
+    cam = load_camera(name)
+    assert cam.isp.processing == "legacy" and cam.isp.highlight == "clip"
+    assert cam.isp.noise_reduction == "none" and cam.isp.tone_curve == "srgb" and cam.isp.sharpening_amount == 0.0
+    img = process(_seeded_raw(cam), cam, x0, y0)
+    got = (hashlib.sha256(img.rgb8.tobytes()).hexdigest()[:16], hashlib.sha256(img.jpeg).hexdigest()[:16])
+    assert got == LEGACY_SHA256[(name, x0, y0)]
+
+
+def test_legacy_equals_the_old_stage_order():
+    """An explicit re-implementation of the old ISP: demosaic → gains → clip → matrix → sRGB → JPEG."""
+    cam = load_camera("canon-t6-18mm")
+    s = cam.sensor
+    raw = _seeded_raw(cam)
+    linear = (raw.astype(np.float32) - np.float32(s.black_level_DN)) * np.float32(
+        1.0 / (s.white_level_DN - s.black_level_DN)
+    )
+    rgb = demosaic(linear, s.cfa, 3, 1) * daylight_gains(cam).astype(np.float32)
+    rgb = np.clip(rgb, 0.0, 1.0) @ camera_to_srgb_matrix(cam).T.astype(np.float32)
+    ref = srgb_encode_8bit(rgb)
+    img = process(raw, cam, 3, 1)
+    assert np.array_equal(img.rgb8, ref)
+    assert img.jpeg == encode_jpeg(ref, cam)
+
+
+def test_noise_reduction_is_opencv_nonlocal_means():
+    rng = np.random.default_rng(1)
+    img = np.clip(rng.normal(90, 12, (64, 80, 3)), 0, 255).astype(np.uint8)
+    direct = cv2.fastNlMeansDenoisingColored(np.ascontiguousarray(img[..., ::-1]), None, 4.0, 15.0, 7, 21)[..., ::-1]
+    assert np.array_equal(reduce_noise(img, 4.0, 15.0), direct)
+
+
+def test_process_applies_noise_reduction_at_the_frames_gain():
+    cam = load_camera("canon-t6-18mm")
+    nr = _with(
+        cam, noise_reduction="nlmeans", nr_analog_gain=(1.0, 64.0), nr_luma_h=(1.0, 3.0), nr_chroma_h=(3.0, 16.0)
+    )
+    assert noise_reduction_strength(nr, 64.0) == (3.0, 16.0)
+    assert noise_reduction_strength(nr, 8.0) == pytest.approx((2.0, 9.5))  # halfway in log(gain)
+    assert noise_reduction_strength(nr, 500.0) == (3.0, 16.0)  # held beyond the table
+    raw = _seeded_raw(cam)[:64]
+    legacy = process(raw, cam).rgb8
+    assert np.array_equal(process(raw, nr, analog_gain=64.0).rgb8, reduce_noise(legacy, 3.0, 16.0))
+    with pytest.raises(ValueError, match=r"^analog_gain: "):
+        process(raw, nr)
+
+
+def test_noise_reduction_lowers_chroma_noise_of_a_flat_patch():
+    """Flat grey patch with chroma noise (std 6 codes in Cr, Cb): NR cuts it ≥ 3x; the mean stays within 1 code."""
+    rng = np.random.default_rng(2)
+    ycc = np.empty((128, 128, 3))
+    ycc[..., 0] = 110 + rng.normal(0, 2, (128, 128))
+    ycc[..., 1:] = 128 + rng.normal(0, 6, (128, 128, 2))
+    img = cv2.cvtColor(np.clip(np.rint(ycc), 0, 255).astype(np.uint8), cv2.COLOR_YCrCb2RGB)
+    out = reduce_noise(img, 2.0, 20.0)
+    before = cv2.cvtColor(img, cv2.COLOR_RGB2YCrCb).reshape(-1, 3).astype(float)
+    after = cv2.cvtColor(out, cv2.COLOR_RGB2YCrCb).reshape(-1, 3).astype(float)
+    assert np.all(after[:, 1:].std(0) < before[:, 1:].std(0) / 3)
+    assert np.abs(out.reshape(-1, 3).mean(0) - img.reshape(-1, 3).mean(0)).max() < 1.0
+
+
+def _core_raw(cam, b_fraction: float) -> np.ndarray:
+    """RGGB mosaic whose R and G sites sit at the white level, B at a fraction of it."""
+    s = cam.sensor
+    raw = np.full((16, 16), s.white_level_DN, np.uint16)
+    raw[1::2, 1::2] = round(s.black_level_DN + b_fraction * (s.white_level_DN - s.black_level_DN))
+    return raw
+
+
+def test_clipped_red_core_is_pale_yellow_with_clip_and_white_with_blend():
+    cam = load_camera("canon-t6-18mm")
+    assert cam.sensor.cfa == "RGGB"
+    raw = _core_raw(cam, 0.5)
+    clip = process(raw, _with(cam, highlight="clip")).rgb8[8, 8]
+    blend = process(raw, _with(cam, highlight="blend")).rgb8[8, 8]
+    h, s_, v = _hsv(clip)
+    assert clip[0] >= 245 and clip[1] >= 245 and clip[2] < 215 and 20 <= h <= 35 and s_ > 40 and v == 255
+    assert np.all(blend >= 250)
+    # the output pixel's channels follow dcraw -H 2: more neutral than -H 0 even when B is nearly dark
+    assert _hsv(process(_core_raw(cam, 0.05), _with(cam, highlight="blend")).rgb8[8, 8])[1] < 128
+
+
+def test_highlight_mode_leaves_unclipped_pixels_alone():
+    cam = load_camera("canon-t6-18mm")
+    s = cam.sensor
+    assert daylight_gains(cam).max() < 2.5
+    rng = np.random.default_rng(4)
+    raw = rng.integers(
+        int(s.black_level_DN), int(s.black_level_DN + 0.4 * (s.white_level_DN - s.black_level_DN)), (40, 40)
+    )
+    raw = raw.astype(np.uint16)
+    ref = process(raw, cam).rgb8
+    for mode in ("unclip", "blend"):
+        assert np.array_equal(process(raw, _with(cam, highlight=mode)).rgb8, ref)
+
+
+def test_tone_curves():
+    x = np.linspace(0.0, 1.0, 10001)
+    assert np.array_equal(tone_curve(x, "srgb"), colour.cctf_encoding(x, function="sRGB"))
+    for c in (0.0, 0.25, 0.5, 1.0):
+        y = tone_curve(x, "picture-standard", c)
+        assert y[0] == 0.0 and y[-1] == pytest.approx(1.0, abs=1e-12)
+        assert np.all(np.diff(y) >= 0)
+    # an S-curve about the encoded mid-point: darker below v = 0.5 (mid-grey, v = 0.46), brighter above
+    lin = np.array([0.18, 0.5])
+    assert np.all(np.sign(tone_curve(lin, "picture-standard", 0.25) - tone_curve(lin, "srgb")) == [-1, 1])
+    # the picture-style path with zero contrast is the sRGB curve, to the table's rounding (≤ 1 code)
+    cam = load_camera("canon-t6-18mm")
+    raw = _seeded_raw(cam)[:64]
+    a = process(raw, cam).rgb8.astype(int)
+    b = process(raw, _with(cam, tone_curve="picture-standard", tone_contrast=0.0)).rgb8.astype(int)
+    assert np.abs(a - b).max() <= 1
+
+
+def test_sharpening_raises_edge_contrast_and_keeps_flat_areas():
+    img = np.full((32, 32, 3), 60, np.uint8)
+    img[:, 16:] = 160
+    out = unsharp_mask(img, 0.5, 1.0)
+    y_in = cv2.cvtColor(img, cv2.COLOR_RGB2YCrCb)[..., 0].astype(int)
+    y_out = cv2.cvtColor(out, cv2.COLOR_RGB2YCrCb)[..., 0].astype(int)
+    assert y_out[:, 15].mean() < y_in[:, 15].mean() - 5 and y_out[:, 16].mean() > y_in[:, 16].mean() + 5
+    assert np.abs(out[:, :8].astype(int) - img[:, :8]).max() <= 1
+
+
+def test_bad_options_name_the_field():
+    cam = load_camera("canon-t6-18mm")
+    for field, value in [
+        ("highlight", "rebuild"),
+        ("noise_reduction", "wavelet"),
+        ("tone_curve", "log"),
+        ("tone_contrast", 2.0),
+    ]:
+        with pytest.raises(ValueError, match=rf"^isp\.{field}: "):
+            check_isp_options(_with(cam, **{field: value}))
+
+
+@pytest.mark.parametrize("body", ["canon-eos-1300d", "logitech-c270", "spedal-920"])
+def test_body_processing_options_are_valid(body):
+    """Each body file's processing tables build a valid ISP; the default is legacy."""
+    values, _ = load_sourced(BODY_DIR / f"{body}.toml")
+    isp = values["isp"]
+    assert isp["processing"] == "legacy" and "legacy" in isp["processing_options"]
+    cam = load_camera({"canon-eos-1300d": "canon-t6-18mm"}.get(body, body))
+    for name, pp in isp["processing_options"].items():
+        kw = {k: tuple(v) if isinstance(v, list) else v for k, v in pp.items()}
+        check_isp_options(_with(cam, processing=name, **kw))

@@ -1,0 +1,196 @@
+"""studies.engine.unknowns: the registry of inputs the source study did not give (studies/data/unknowns.toml),
+its sampling, how a set of values becomes a frame task, camera overrides on the frame path, the CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from camera_models.camera import load_camera, with_overrides
+from scenes.scenario import Scenario
+from scenes.sourced import DataFileError
+from studies.engine.frame import capture_frame, frame_inputs
+from studies.engine.unknowns import (
+    KINDS,
+    apply,
+    data_file_value,
+    fixed,
+    load_unknowns,
+    nominal,
+    sample,
+    settable,
+)
+
+TINY = {"spp": 1, "oversampling": 1, "near_field_spp": 16, "crop": "target", "seed": 0}
+REQUIRED = {
+    "led_current_mA", "luminous_intensity_cd", "reduced_optical_depth", "sheet_transmittance",
+    "lit_face_diameter_mm", "housing", "focus_distance_m", "f_number", "glare", "highlight", "noise_reduction",
+    "max_exposure_s",
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def registry():
+    return load_unknowns()
+
+
+def test_every_entry_has_target_kind_nominal_and_a_reason(registry):
+    assert len(registry) >= 12
+    for name, u in registry.items():
+        assert u.name == name and u.kind in KINDS and u.target.split(".")[0] in ("scenario", "camera", "data")
+        assert u.provenance.startswith(("source: ", "assumed: ")) and len(u.provenance) > 40, name
+        assert u.contains(u.nominal), name
+        if u.kind in ("uniform", "loguniform"):
+            assert u.low <= u.nominal <= u.high and u.low < u.high
+        if u.kind == "choice":
+            assert u.nominal in u.choices and len(u.choices) >= 2
+    covered = {part for u in registry.values() for part in u.target.split(".")[-2:]}
+    assert REQUIRED <= covered
+
+
+def test_nominals_agree_with_the_data_files_and_the_camera_models(registry):
+    """A data target's nominal is the data file's value; a camera target's nominal is each of its cameras'
+    current value wherever the model has that field."""
+    for u in registry.values():
+        if u.namespace == "data":
+            assert data_file_value(u.target) == pytest.approx(u.nominal), u.name
+        if u.namespace == "camera":
+            for cam in u.cameras or ("canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920"):
+                obj = load_camera(cam)
+                for key in u.path.split("."):
+                    obj = getattr(obj, key, None)
+                if obj is not None:
+                    expected = pytest.approx(u.nominal) if isinstance(obj, float) else u.nominal
+                    assert obj == expected, (u.name, cam)
+
+
+@pytest.mark.parametrize("method", ["sobol", "lhs", "random"])
+def test_samples_lie_within_bounds_and_repeat_per_seed(registry, method):
+    a = sample(registry, 64, seed=7, method=method)
+    assert a == sample(registry, 64, seed=7, method=method)
+    assert a != sample(registry, 64, seed=8, method=method)
+    assert len(a) == 64 and all(set(s) == set(registry) for s in a)
+    for s in a:
+        for name, value in s.items():
+            assert registry[name].contains(value), (name, value)
+    json.dumps(a)  # plain values: a task stays JSON-able
+    for name, u in registry.items():
+        if u.kind == "choice":
+            assert {s[name] for s in a} == set(u.choices), name  # every choice is drawn
+
+
+def test_sobol_mean_of_a_uniform_entry_is_its_midpoint(registry):
+    uniform = [u for u in registry.values() if u.kind == "uniform"]
+    assert uniform
+    values = sample(registry, 256, seed=0)
+    for u in uniform:
+        mean = np.mean([s[u.name] for s in values])
+        mid = (u.low + u.high) / 2
+        assert abs(mean - mid) <= 0.02 * mid, u.name
+
+
+def test_fixed_and_nominal(registry):
+    pinned = fixed(registry, led_drive=2.0, housing="white")
+    assert pinned["led_drive"].kind == "fixed" and registry["led_drive"].kind == "loguniform"
+    assert all(s["led_drive"] == 2.0 and s["housing"] == "white" for s in sample(pinned, 8, seed=1))
+    assert nominal(pinned)["led_drive"] == 2.0 and nominal(registry)["led_drive"] == 20.0
+    with pytest.raises(ValueError, match=r"led_drive=100 is outside 0.05-20 mA"):
+        fixed(registry, led_drive=100)
+    with pytest.raises(ValueError, match="no unknown 'nope'"):
+        fixed(registry, nope=1)
+
+
+def test_apply_sets_scenario_and_camera_fields_and_leaves_the_task_alone(registry):
+    task = {"scenario": {"range_m": 2.0, "camera": "canon-t6-18mm"}, "render": dict(TINY), "seed": 0}
+    before = json.dumps(task, sort_keys=True)
+    values = {"led_drive": 1.5, "housing": "white", "f_number_18mm": 5.6, "f_number_10mm": 5.6,
+              "webcam_max_exposure": 0.1, "highlight_mode": "blend", "lit_face_diameter": 12.0}  # fmt: skip
+    out = apply(task, values, registry)
+    assert json.dumps(task, sort_keys=True) == before
+    assert out["scenario"] == {"range_m": 2.0, "camera": "canon-t6-18mm", "led_current_mA": 1.5, "housing": "white"}
+    # 10 mm and webcam entries do not apply to the 18 mm camera; the data value at its nominal changes nothing
+    assert out["camera_overrides"] == {"lens.f_number": 5.6, "isp.highlight": "blend"}
+    assert out["render"] == task["render"] and out["seed"] == 0
+    Scenario(**out["scenario"])  # still a valid scenario
+    assert "camera_overrides" not in apply(task, {"led_drive": 1.0}, registry)
+    with pytest.raises(ValueError, match=r"lit_face_diameter \(data\.beacons\.common\.lit_face_diameter_mm\)"):
+        apply(task, {"lit_face_diameter": 14.0}, registry)
+    assert set(settable(registry)) == {n for n, u in registry.items() if not u.target.startswith("data.")}
+    webcam = apply({"scenario": {"camera": "logitech-c270"}}, {"webcam_max_exposure": 0.1}, registry)
+    assert webcam["camera_overrides"] == {"exposure.max_exposure_s": 0.1}
+
+
+def test_with_overrides_changes_exactly_the_named_field():
+    camera = load_camera("canon-t6-18mm")
+    changed = with_overrides(camera, {"lens.f_number": 5.6})
+    assert camera.lens.f_number == 3.5 and changed.lens.f_number == 5.6
+    assert changed.lens == type(camera.lens)(**{**camera.lens.__dict__, "f_number": 5.6})
+    assert changed.sensor is camera.sensor and changed.isp is camera.isp and changed.exposure is camera.exposure
+    assert with_overrides(camera, {}) is camera
+    for path, message in [
+        ("lens.no_such_field", r"'lens.no_such_field': LensModel has no field 'no_such_field'"),
+        ("optics.f_number", r"'optics.f_number': Camera has no field 'optics'"),
+        ("lens", r"'lens': names a part, not a field"),
+        ("lens.f_number.x", r"float has no field 'x'"),
+    ]:
+        with pytest.raises(ValueError, match=message) as err:
+            with_overrides(camera, {path: 1.0})
+        assert "\n" not in str(err.value)
+
+
+def test_bad_data_file_gives_one_line_naming_file_and_field(tmp_path):
+    good = (
+        'target = "scenario.housing"\nkind = "choice"\nchoices = ["black", "white"]\n'
+        'assumed = "a reason long enough to count"\n'
+    )
+    cases = {
+        '[a]\nnominal = "grey"\n' + good: r"bad\.toml: a\.nominal: 'grey' is outside black \| white",
+        '[a]\nnominal = "black"\n' + good.replace("assumed", "note"): r"a\.note: unknown key",
+        '[a]\nnominal = "black"\n' + good.replace("scenario.housing", "scenario.colour"): r"a\.target: 'colour' is not",
+        '[a]\ntarget = "camera.lens.f_number"\nkind = "uniform"\nlow = 2\nhigh = 1\nnominal = 1.5\nsource = "x"\n': (
+            r"a: needs exactly one of 'source' or 'assumed'"
+        ),
+        '[a]\ntarget = "camera.lens.f_number"\nkind = "loguniform"\nlow = 0\nhigh = 1\nnominal = 0.5\n'
+        'source = "a reason long enough to count"\n': r"a\.low: a loguniform range needs low > 0",
+        '[a]\ntarget = "data.leds.red.luminous_intensity_cd"\nkind = "fixed"\nnominal = 9.0\n'
+        'source = "a reason long enough to count"\n': r"a\.nominal: 9\.0 differs from the data file's 5\.1",
+    }
+    for text, message in cases.items():
+        path = tmp_path / "bad.toml"
+        path.write_text(text)
+        with pytest.raises(DataFileError, match=message) as err:
+            load_unknowns(path)
+        assert "\n" not in str(err.value)
+
+
+def test_frame_path_applies_overrides_and_ignores_their_absence():
+    task = {
+        "scenario": {"range_m": 2.0, "yaw_deg": 10.0, "foam": True, "paper_sheets": 1, "paper_colour": "matched",
+                     "led_current_mA": 2.0},
+        "render": dict(TINY), "seed": 0, "exposure": {"iso": 6400, "exposure_s": 1 / 60},
+    }  # fmt: skip
+    assert frame_inputs(task)[1] is load_camera("canon-t6-18mm")  # no overrides: the very same camera
+    assert frame_inputs({**task, "camera_overrides": {}})[1] is load_camera("canon-t6-18mm")
+    darker = {**task, "camera_overrides": {"lens.f_number": 5.6}}
+    assert frame_inputs(darker)[1].lens.f_number == 5.6
+    black = load_camera("canon-t6-18mm").sensor.black_level_DN
+    signal = [capture_frame(t).capture.raw.astype(float).sum() - black * capture_frame(t).capture.raw.size
+              for t in (task, darker)]  # fmt: skip
+    assert signal[1] < 0.6 * signal[0]  # (3.5 / 5.6)² = 0.39 of the light, plus vignetting change
+    with pytest.raises(ValueError, match=r"'lens\.glare_fraction': LensModel has no field"):
+        capture_frame({**task, "camera_overrides": {"lens.glare_fraction": 0.02}})
+    with pytest.raises(ValueError, match=r"'geometry\.width_px': the geometry is fixed"):
+        capture_frame({**task, "camera_overrides": {"geometry.width_px": 100}})
+
+
+def test_cli_lists_the_unknowns():
+    run = [sys.executable, "-m", "studies.cli", "unknowns"]
+    listed = json.loads(subprocess.run([*run, "--json"], capture_output=True, text=True, check=True).stdout)
+    assert [r["name"] for r in listed] == list(load_unknowns())
+    assert {"target", "range", "nominal", "provenance", "per_task"} <= set(listed[0])
+    table = subprocess.run(run, capture_output=True, text=True, check=True).stdout.splitlines()
+    assert table[0].split("\t")[:3] == ["name", "target", "range"] and len(table) == len(listed) + 1
