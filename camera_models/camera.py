@@ -17,7 +17,7 @@ import colour
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.glare import GlareSpread
+from camera_models.glare import GlareSpread, OpticsEffects
 from scenes import spectra
 from scenes.sourced import load_sourced
 from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry, camera_names
@@ -205,6 +205,9 @@ class Camera:
     sensor: SensorModel
     isp: ISPModel
     exposure: ExposureModel
+    effects: OpticsEffects = OpticsEffects()
+    """Optional optical effects (defocus, veiling glare, crosstalk); default none, the plain
+    path. The unknowns registry switches them per task (``camera_overrides``)."""
 
     @property
     def pixel_area_m2(self) -> float:

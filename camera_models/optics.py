@@ -323,13 +323,14 @@ def optical_image(
     f_number
         Working f-number; default the lens's.
     effects
-        Defocus, veiling glare and pixel crosstalk to apply (default: none, the plain path).
+        Defocus, veiling glare and pixel crosstalk to apply (default: the camera's
+        ``effects``, which are none unless a task switches them on).
     """
     if not math.isfinite(exposure_s) or exposure_s <= 0:
         raise ValueError(f"exposure_s: expected a time > 0 s, got {exposure_s!r}")
     n = camera.lens.f_number if f_number is None else check_f_number(f_number)
     grid = radiance.grid
-    effects = OpticsEffects() if effects is None else effects
+    effects = camera.effects if effects is None else effects
     defocus_subpx = _defocus_subpixels(radiance, camera, n, effects)
     factor = camera_equation_factor_m2_sr(camera.lens, n, camera.pixel_area_m2) * exposure_s
     u, v = grid.subpixel_centres_px()

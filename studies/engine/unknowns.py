@@ -38,7 +38,7 @@ from scenes.view import camera_names
 
 UNKNOWNS_FILE = Path(__file__).resolve().parents[1] / "data" / "unknowns.toml"
 KINDS = ("uniform", "loguniform", "choice", "fixed")
-CAMERA_GROUPS = ("lens", "sensor", "isp", "exposure")
+CAMERA_GROUPS = ("lens", "sensor", "isp", "exposure", "effects")
 """Camera-model parts a run may override (the geometry is fixed by the camera name: the render uses it)."""
 METHODS = ("sobol", "lhs", "random")
 _KEYS = {"target", "kind", "low", "high", "choices", "nominal", "unit", "cameras", "source", "assumed"}
