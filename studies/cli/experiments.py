@@ -16,11 +16,13 @@ from scenes.mitsuba_variant import active_variant
 from scenes.render_cache import atomic_write_bytes
 from scenes.view import camera_names
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console, prepare_out_dir
+from studies.cli.common import UsageError, console, prepare_out_dir, rich_progress
+from studies.engine.sweep import Execution
 from studies.experiments import bench as b
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
+from studies.experiments import unknowns_search as search
 
 
 def e2e_detection(
@@ -42,9 +44,6 @@ def e2e_detection(
     workers: opt.Workers = None,
 ) -> None:
     """Issue 5's end-to-end table: T6 + 18 mm captures of the V2 red side, 1-5 m × 0-30°, both trackers × estimators."""
-    from studies.cli.common import rich_progress
-    from studies.engine.sweep import Execution
-
     if workers is not None and workers < 1:
         raise UsageError(f"workers: expected an integer >= 1, got {workers}")
     options = e2e.default_options(quick, seeds)
@@ -79,7 +78,6 @@ def saturation_table(
     saturation_table.csv (one row per marker) and saturation_table.md (summary,
     webcam auto-exposure values); re-run to resume.
     """
-    from studies.cli.common import rich_progress
 
     cameras = tuple(camera) if camera else saturation.CAMERAS
     for name in cameras:
@@ -175,9 +173,31 @@ def bench(
     Console().print(t)
 
 
+def unknowns_search(
+    out: opt.Out,
+    samples: Annotated[int, typer.Option("--samples", help="Points of the unknowns to try (Sobol').")] = 64,
+    seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per point and side.")] = 1,
+    seed: opt.Seed = 0,
+    workers: opt.Workers = None,
+) -> None:
+    """Which values of the unknowns let the study's printed detector see every colour at close range (T6, 1 m)."""
+    if samples < 1 or seeds < 1:
+        raise UsageError(f"samples, seeds: expected integers >= 1, got {samples}, {seeds}")
+    if workers is not None and workers < 1:
+        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    summary = search.run(out, samples, seeds, seed, Execution(workers=workers, progress=rich_progress))
+    console.print(
+        f"{summary['consistent_points']} of {samples} points consistent ({time.perf_counter() - t0:.0f} s); "
+        f"wrote {out}/samples.csv and summary.json"
+    )
+
+
 COMMANDS = {
     "e2e-detection": e2e_detection,
     "saturation-table": saturation_table,
     "diffuser-mosaic": diffuser_mosaic,
     "bench": bench,
+    "unknowns-search": unknowns_search,
 }
