@@ -9,7 +9,12 @@ Emitter groups: every lit face belongs to the group of its side (``led:red`` …
 luminous ceiling of a room to ``ambient``. The renderer renders one group at a time
 (light transport is linear), so each group's image can be scaled and coloured by its
 own spectrum afterwards. A lit face emits ``1 / A`` W·m⁻²·sr⁻¹ along its normal: one
-W·sr⁻¹ of on-axis LED intensity spread over the face, times cos^(m−1)θ.
+W·sr⁻¹ of on-axis LED intensity spread over the face, times cos^(m−1)θ (plus the LED's
+Lambertian wide share, :mod:`scenes.led`). A housing whose printed wall transmits light
+(``housing_transmittance`` in ``scenes/data/beacons.toml``) also glows: its cylinder carries
+a Lambertian emitter of the side's group with the near-field model's leak radiance
+(:func:`scenes.near_field.housing_leak`), which is how V1's sideways-pointing in-plane LEDs
+are seen from the front.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import numpy as np
 from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
 from scenes.diffusers import paper
 from scenes.led import led_for_side
-from scenes.near_field import NearFieldSettings, marker_emission
+from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.scenario import Scenario, ScenarioError
 from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
 from scenes.view import project
@@ -43,6 +48,36 @@ class CropBox:
     height: int
 
 
+def bare_face_emitter(design: BeaconDesign, side: str) -> dict:
+    """The lit-face emitter of a bare LED: radiance (1/A)[(1 − s) cos^(m−1)θ + s] per W·sr⁻¹."""
+    led = led_for_side(side)
+    emitter = {
+        "type": "marker_face",
+        "group": f"led:{side}",
+        "radiance": 1.0 / design.lit_face_area_m2,
+        "exponent": led.cos_exponent - 1.0,
+    }
+    if led.wide_fraction > 0:
+        emitter["wide"] = led.wide_fraction
+    return emitter
+
+
+def leak_emitter(scenario: Scenario, side: str) -> dict | None:
+    """The Lambertian emitter on a side's housing walls (per W·sr⁻¹ of LED intensity), or
+    ``None`` where the wall is opaque."""
+    leak = housing_leak(
+        scenario.design,
+        led_for_side(side),
+        scenario.housing,
+        scenario.diffuser,
+        side,
+        settings=NearFieldSettings(spp=scenario.render.near_field_spp),
+    )
+    if leak <= 0.0:
+        return None
+    return {"type": "marker_face", "group": f"led:{side}", "radiance": float(np.round(leak, 9)), "exponent": 0.0}
+
+
 def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
     """The lit-face emitter of a side's markers and the face's reflectance.
 
@@ -52,13 +87,7 @@ def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
     design, led, config = scenario.design, led_for_side(side), scenario.diffuser
     group = f"led:{side}"
     if config.is_bare:
-        emitter = {
-            "type": "marker_face",
-            "group": group,
-            "radiance": 1.0 / design.lit_face_area_m2,
-            "exponent": led.cos_exponent - 1.0,
-        }
-        return emitter, design.lit_face_reflectance
+        return bare_face_emitter(design, side), design.lit_face_reflectance
     emission = marker_emission(
         design, led, scenario.housing, config, side, settings=NearFieldSettings(spp=scenario.render.near_field_spp)
     )
@@ -77,31 +106,34 @@ def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
 
 
 def target_shapes(
-    design: BeaconDesign, side: str, housing: str, emitter: dict | None = None, face_material: str = "lit_face"
+    design: BeaconDesign,
+    side: str,
+    housing: str,
+    emitter: dict | None = None,
+    face_material: str = "lit_face",
+    wall_emitter: dict | None = None,
 ) -> list[dict]:
-    """Shapes of one side's target (housings, arms, stalk, lit faces), beacon frame."""
+    """Shapes of one side's target (housings, arms, stalk, lit faces), beacon frame;
+    ``wall_emitter`` (if any) makes each housing's cylinder glow (light leaking out)."""
     rot, trans = target_to_beacon(side, design.d_t_m)
     world = lambda p: rot @ np.asarray(p, float) + trans  # noqa: E731
     wdir = lambda d: rot @ np.asarray(d, float)  # noqa: E731
     mat = f"housing_{housing}"
-    led = led_for_side(side)
     r_face, r_house = design.lit_face_diameter_m / 2, design.housing_radius_m
     depth, w = design.housing_depth_m, design.arm_width_m
     centre = np.array([-design.out_of_plane_m, 0.0, 0.0])  # centre of the in-plane cross
     shapes: list[dict] = []
     if emitter is None:  # bare LED faces
-        emitter = {
-            "type": "marker_face",
-            "group": f"led:{side}",
-            "radiance": 1.0 / design.lit_face_area_m2,
-            "exponent": led.cos_exponent - 1.0,
-        }
+        emitter = bare_face_emitter(design, side)
     for marker in design.markers:
         p, n = marker.position_m, marker.normal
         back = p - depth * n
         shapes.append(disk_shape(world(p), wdir(n), r_face, face_material, emitter))
         shapes.append(disk_shape(world(p - FACE_STANDOFF_M * n), wdir(n), r_house, mat))
-        shapes.append(cylinder_shape(world(back), world(p), r_house, mat))
+        wall = cylinder_shape(world(back), world(p), r_house, mat)
+        if wall_emitter is not None:
+            wall["emitter"] = dict(wall_emitter)
+        shapes.append(wall)
         shapes.append(disk_shape(world(back), wdir(-n), r_house, mat))
         if marker.id == 1:
             shapes.append(beam_shape(world(centre), world(back), w, mat))
@@ -138,7 +170,7 @@ def beacon_shapes(scenario: Scenario) -> tuple[list[dict], dict[str, float]]:
     for side in SIDE_ANGLE_RAD:
         emitter, reflectance = face_emitter(scenario, side)
         face_materials[f"face_{side}"] = reflectance
-        shapes += target_shapes(design, side, housing, emitter, f"face_{side}")
+        shapes += target_shapes(design, side, housing, emitter, f"face_{side}", leak_emitter(scenario, side))
     return shapes, face_materials
 
 

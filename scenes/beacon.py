@@ -72,6 +72,12 @@ class BeaconDesign:
     target_height_m: float
     lit_face_reflectance: float
     housing_reflectance: dict[str, float]
+    housing_transmittance: dict[str, float]
+
+    def __post_init__(self) -> None:
+        for finish, t in self.housing_transmittance.items():
+            if not 0.0 <= t <= 1.0 - self.housing_reflectance[finish]:
+                raise ValueError(f"beacons.toml housing_transmittance.{finish}: expected 0 <= T <= 1 - R")
 
     @property
     def housing_radius_m(self) -> float:
@@ -150,6 +156,7 @@ def load_beacons() -> dict[str, BeaconDesign]:
             target_height_m=c["target_height_mm"] * mm,
             lit_face_reflectance=c["lit_face_reflectance"],
             housing_reflectance=dict(values["housing_reflectance"]),
+            housing_transmittance=dict(values["housing_transmittance"]),
         )
     return designs
 

@@ -7,10 +7,14 @@ An LED is described by its datasheet figures (``scenes/data/leds.toml``):
 * on-axis radiant intensity from the datasheet luminous intensity Iv (cd) at the test
   current: I_e = Iv / K, with K the luminous efficacy of the LED's spectrum (lm/W),
   scaled to the drive current as (I_F / I_ref)^γ;
-* angular pattern I(θ) = I₀ cosᵐθ for θ < 90°, zero behind, with m chosen so that the
-  intensity halves at the datasheet half-angle θ½: m = ln ½ / ln cos θ½.
+* angular pattern I(θ)/I₀ = (1 − s) cosᵐθ + s cos θ for θ < 90°, zero behind: the lens's
+  main lobe, with m chosen so that the intensity halves at the datasheet half-angle θ½
+  (m = ln ½ / ln cos θ½), plus a weak Lambertian *wide* component of relative strength s
+  (``wide_fraction``): chip light that the reflector cup and the dome do not focus, scattered
+  in the epoxy and leaving through the dome's flanks. I(0) = I₀ for every s.
 
-The radiant flux of such a source is Φ = 2π I₀ / (m + 1).
+The radiant flux of such a source is Φ = I₀ [(1 − s) 2π / (m + 1) + s π]. Where a datasheet
+gives both Φ and I₀, :func:`wide_fraction_for_flux` solves this for s.
 """
 
 from __future__ import annotations
@@ -51,6 +55,8 @@ class LED:
         γ in Iv ∝ I_F^γ.
     lens_diameter_mm
         Diameter of the LED package's lens, mm.
+    wide_fraction
+        s: relative on-axis strength of the Lambertian wide component (dimensionless, 0-1).
     """
 
     colour: str
@@ -63,6 +69,11 @@ class LED:
     half_angle_deg: float
     current_exponent: float
     lens_diameter_mm: float
+    wide_fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.wide_fraction < 1.0:
+            raise ValueError(f"wide_fraction: expected 0 <= s < 1, got {self.wide_fraction!r}")
 
     @property
     def cos_exponent(self) -> float:
@@ -100,13 +111,43 @@ class LED:
         return self.luminous_intensity_cd / self.luminous_efficacy_lm_per_W * scale
 
     def relative_intensity(self, theta_rad: NDArray[np.float64] | float) -> NDArray[np.float64]:
-        """I(θ)/I₀ = cosᵐθ for θ < 90°, else 0 (dimensionless)."""
-        c = np.cos(np.asarray(theta_rad, dtype=np.float64))
-        return np.where(c > 0.0, np.clip(c, 0.0, None) ** self.cos_exponent, 0.0)
+        """I(θ)/I₀ = (1 − s) cosᵐθ + s cos θ for θ < 90°, else 0 (dimensionless)."""
+        c = np.clip(np.cos(np.asarray(theta_rad, dtype=np.float64)), 0.0, None)
+        s = self.wide_fraction
+        return np.where(c > 0.0, (1.0 - s) * c**self.cos_exponent + s * c, 0.0)
+
+    @property
+    def flux_per_intensity_sr(self) -> float:
+        """Φ / I₀ = (1 − s) 2π / (m + 1) + s π, sr."""
+        s = self.wide_fraction
+        return (1.0 - s) * 2.0 * math.pi / (self.cos_exponent + 1.0) + s * math.pi
 
     def radiant_flux_W(self, current_mA: float | None = None) -> float:
-        """Total radiant flux Φ = 2π I₀ / (m + 1), W."""
-        return 2.0 * math.pi * self.radiant_intensity_W_sr(current_mA) / (self.cos_exponent + 1.0)
+        """Total radiant flux Φ = I₀ [(1 − s) 2π / (m + 1) + s π], W."""
+        return self.radiant_intensity_W_sr(current_mA) * self.flux_per_intensity_sr
+
+
+def wide_fraction_for_flux(flux_per_intensity_sr: float, half_angle_deg: float) -> float:
+    """The wide fraction s that gives a lamp of half-angle θ½ the datasheet ratio Φ / I₀.
+
+    Parameters
+    ----------
+    flux_per_intensity_sr
+        Datasheet total flux over on-axis intensity, Φv / Iv (lm/cd = sr) or Φe / Ie (W/(W·sr⁻¹)).
+    half_angle_deg
+        Datasheet half-angle θ½, degrees.
+
+    Returns
+    -------
+    float
+        s (dimensionless); ``ValueError`` if the ratio is below the bare cosᵐ lobe's 2π/(m + 1)
+        or above a Lambertian source's π.
+    """
+    m = math.log(0.5) / math.log(math.cos(math.radians(half_angle_deg)))
+    lobe = 2.0 * math.pi / (m + 1.0)
+    if not lobe <= flux_per_intensity_sr < math.pi:
+        raise ValueError(f"flux_per_intensity_sr: expected {lobe:.4f} <= Φ/I₀ < π sr, got {flux_per_intensity_sr!r}")
+    return (flux_per_intensity_sr - lobe) / (math.pi - lobe)
 
 
 @lru_cache(maxsize=1)

@@ -20,6 +20,13 @@ the LED's 20–35 nm band. White paper and foam are grey, so for them this is ex
 Views: with paper in front the exit light is Lambertian by construction (the front
 sheet transmits diffusely), so one view (θ = 0) gives the whole table; foam alone needs
 several angles.
+
+Housing leak: the bore's wall is a ``diffuse_sheet`` with the printed wall's diffuse
+reflectance R and transmittance T (``scenes/data/beacons.toml``), so light that reaches
+the wall partly leaks out through it. :func:`housing_leak` renders the housing from the
+side and returns the mean (Lambertian) radiance leaving its outer wall, which the
+beacon-scale scene puts on the housing's cylinder as a second emitter of the side's group.
+The housing's back is the arm's mount (V1) or elbow (V2) and stays opaque.
 """
 
 from __future__ import annotations
@@ -42,7 +49,7 @@ from scenes.shapes import disk_shape
 
 log = logging.getLogger("beacon_sim")
 
-NEAR_FIELD_VERSION = 2
+NEAR_FIELD_VERSION = 3
 LED_DEPTH_M = 6.0e-3
 """Front of the LED lens behind the face: room for 5 sheets (0.5 mm), 5 mm foam, 0.5 mm air."""
 FOAM_TOP_M = -0.5e-3
@@ -151,20 +158,29 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
     r_led = led.lens_diameter_mm * 1e-3 / 2
     r_in = r_face - CLEARANCE_M
     up = np.array([0.0, 0.0, 1.0])
+    led_emitter = {
+        "type": "marker_face",
+        "group": "led",
+        "radiance": 1.0 / (math.pi * r_led**2),
+        "exponent": led.cos_exponent - 1.0,
+    }
+    if led.wide_fraction > 0:
+        led_emitter["wide"] = led.wide_fraction
     shapes: list[dict] = [
-        {"type": "cylinder", "p0": [0.0, 0.0, -depth], "p1": [0.0, 0.0, 0.0], "radius": r_face, "material": "housing"},
+        {
+            "type": "cylinder",
+            "p0": [0.0, 0.0, -depth],
+            "p1": [0.0, 0.0, 0.0],
+            "radius": r_face,
+            "material": "housing_wall",
+        },
         disk_shape(np.array([0.0, 0.0, -depth]), up, r_face, "housing"),
         disk_shape(
             np.array([0.0, 0.0, -LED_DEPTH_M]),
             up,
             r_led,
             "led_body",
-            {
-                "type": "marker_face",
-                "group": "led",
-                "radiance": 1.0 / (math.pi * r_led**2),
-                "exponent": led.cos_exponent - 1.0,
-            },
+            led_emitter,
         ),
         {
             "type": "cylinder",
@@ -201,6 +217,10 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
         ]
     return {
         "materials": {"housing": design.housing_reflectance[housing], "led_body": LED_BODY_REFLECTANCE},
+        "housing_wall": {
+            "reflectance": design.housing_reflectance[housing],
+            "transmittance": design.housing_transmittance[housing],
+        },
         "sheet": {"reflectance": r1, "transmittance": t1},
         "medium": medium,
         "shapes": shapes,
@@ -227,6 +247,11 @@ def marker_objects(spec: dict, to_world: NDArray[np.float64] | None = None, pref
             "bsdf": {"type": "diffuse", "reflectance": spec["materials"]["led_body"]},
         },
         f"{prefix}mat_sheet": {"type": "diffuse_sheet", "id": f"{prefix}mat_sheet", **spec["sheet"]},
+        f"{prefix}mat_housing_wall": {
+            "type": "diffuse_sheet",
+            "id": f"{prefix}mat_housing_wall",
+            **spec["housing_wall"],
+        },
         f"{prefix}mat_null": {"type": "null", "id": f"{prefix}mat_null"},
     }
     if spec["medium"]:
@@ -365,6 +390,60 @@ def marker_emission(
     else:
         profile, from_cache = stored["profile"], True
     return MarkerEmission(profile, np.asarray(angles, dtype=np.float64), spec["radius_m"], factor, lam_ref, from_cache)
+
+
+def housing_leak(
+    design: BeaconDesign,
+    led: LED,
+    housing: str,
+    config: DiffuserConfig,
+    side: str,
+    cache: RenderCache | None = None,
+    settings: NearFieldSettings | None = None,
+) -> float:
+    """Mean radiance leaving a housing's outer wall per W·sr⁻¹ of LED on-axis intensity, m⁻².
+
+    The near-field scene is viewed from the side, orthographically, across the housing's
+    axis. The wall transmits diffusely, so every pixel over the wall shows the (Lambertian)
+    exit radiance at its height; the mean over the wall's central band is the area mean L̄
+    at the bore radius. Referred to the housing's outer radius by flux conservation
+    (× r_bore / r_outer), it is the radiance of the beacon-scale housing cylinder. Zero for
+    an opaque wall (T = 0); rendered once per configuration, then cached.
+    """
+    if design.housing_transmittance[housing] <= 0.0:
+        return 0.0
+    settings = settings or NearFieldSettings()
+    variant = select_variant("mono").variant
+    spec = near_field_spec(design, led, housing, config, side)
+    key = content_key("housing-leak", NEAR_FIELD_VERSION, variant, spec, settings.spp, settings.film_px, settings.seed)
+    cache = cache if cache is not None else RenderCache()
+    stored = cache.load(key)
+    if stored is None:
+        leak = _render_leak(spec, design.housing_depth_m, settings)
+        STATS.renders += 1
+        cache.store(key, {"leak": np.array([leak])})
+    else:
+        leak = float(stored["leak"][0])
+    return leak * spec["radius_m"] / design.housing_radius_m
+
+
+def _render_leak(spec: dict, depth_m: float, settings: NearFieldSettings) -> float:
+    """Mean exit radiance of the bore's wall seen from the side (see :func:`housing_leak`), m⁻²."""
+    import mitsuba as mi
+
+    r = spec["radius_m"]
+    half = 1.05 * max(r, depth_m / 2)
+    zc = -depth_m / 2
+    scene_dict = _to_mitsuba(spec, settings, 0.0)
+    scene_dict["sensor"]["to_world"] = (
+        mi.ScalarTransform4f().look_at([0.1, 0.0, zc], [0.0, 0.0, zc], [0.0, 0.0, 1.0]).scale([half, half, 1.0])
+    )
+    image = np.asarray(mi.render(mi.load_dict(scene_dict), seed=settings.seed), dtype=np.float64).mean(axis=-1)
+    n = image.shape[0]
+    a = ((np.arange(n) + 0.5) / n * 2 - 1) * half
+    across, height = np.meshgrid(a, a)  # film x (across the axis), film y (along it, about zc)
+    band = (np.abs(across) < 0.7 * r) & (np.abs(height) < 0.45 * depth_m)
+    return float(image[band].mean())
 
 
 def _render_profile(spec: dict, settings: NearFieldSettings, angles: tuple[float, ...]) -> NDArray[np.float64]:

@@ -8,8 +8,9 @@ LED axis, that intensity is the radiance
     L(θ) = I(θ) / (A cos θ) = (I₀ / A) cos^(m−1) θ,
 
 which is what the ``marker_face`` plugin emits: ``radiance`` × cos^``exponent`` θ with
-``exponent = m − 1`` (``exponent = 0`` is Lambertian). Direct sampling picks points
-uniformly on the shape, as Mitsuba's own area emitter does; the returned weights and
+``exponent = m − 1`` (``exponent = 0`` is Lambertian). An LED with a Lambertian wide
+component s (:mod:`scenes.led`) adds ``wide`` = s: ``radiance`` × [(1 − s) cos^``exponent`` θ + s].
+Direct sampling picks points uniformly on the shape, as Mitsuba's own area emitter does; the returned weights and
 pdfs are consistent, so multiple importance sampling stays unbiased.
 
 A marker with diffusers instead carries a ``profile``: a bitmap texture holding its
@@ -33,15 +34,20 @@ def marker_face_class():
             mi.Emitter.__init__(self, props)
             self.radiance = dr.opaque(mi.Float, props.get("radiance", 1.0))
             self.exponent = float(props.get("exponent", 0.0))
+            self.wide = float(props.get("wide", 0.0))  # Lambertian share s of the on-axis radiance
             self.profile = props.get("profile", None)  # texture over (r, θ), or None
             if self.exponent < 0:
                 raise ValueError("marker_face.exponent: expected >= 0")
+            if not 0.0 <= self.wide <= 1.0:
+                raise ValueError("marker_face.wide: expected 0 <= wide <= 1")
             self.m_flags = mi.EmitterFlags.Surface
             # a per-shape tag that keeps the scene parser from merging identical faces
             self.instance = int(props.get("instance", 0))
 
         def _emitted(self, cos_theta, uv):
             lobe = dr.power(dr.maximum(cos_theta, 0.0), self.exponent)
+            if self.wide > 0.0:
+                lobe = (1.0 - self.wide) * lobe + self.wide
             if self.profile is not None:
                 lookup = dr.zeros(mi.SurfaceInteraction3f)
                 theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))

@@ -12,7 +12,7 @@ import numpy as np
 CODE = (
     "import json, numpy as np; from scenes.render import render; from scenes.scenario import Scenario, RenderSettings;"
     "from scenes.mitsuba_variant import select_variant; v = select_variant().variant;"
-    "s = Scenario(range_m=9.0, render=RenderSettings(spp=16, oversampling=1, crop='target'));"
+    "s = Scenario(range_m=9.0, render=RenderSettings(spp=16, oversampling=1, crop='target', near_field_spp=16));"
     "r = render(s, groups=['led:red']);"
     "img = r.component('led:red').image_W_m2_sr; print(json.dumps([v, float(img.sum()), float(img.max())]))"
 )
