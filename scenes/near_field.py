@@ -371,24 +371,9 @@ def marker_emission(
         settings.radial_bins,
         settings.seed,
     )
-    cache = cache if cache is not None else RenderCache()
-    stored = cache.load(key)
-    if stored is None:
-        t0 = time.perf_counter()
-        profile = _render_profile(spec, settings, angles)
-        STATS.renders += 1
-        log.info(
-            "near-field render (%s, foam=%s, %d sheets, %s) in %.1f s",
-            side,
-            config.foam,
-            config.paper_sheets,
-            config.paper_colour_for(side),
-            time.perf_counter() - t0,
-        )
-        cache.store(key, {"profile": profile})
-        from_cache = False
-    else:
-        profile, from_cache = stored["profile"], True
+    paper = config.paper_colour_for(side)
+    label = f"near-field render ({side}, foam={config.foam}, {config.paper_sheets} sheets, {paper})"
+    profile, from_cache = _cached(cache, key, "profile", label, lambda: _render_profile(spec, settings, angles))
     return MarkerEmission(profile, np.asarray(angles, dtype=np.float64), spec["radius_m"], factor, lam_ref, from_cache)
 
 
@@ -416,15 +401,24 @@ def housing_leak(
     variant = select_variant("mono").variant
     spec = near_field_spec(design, led, housing, config, side)
     key = content_key("housing-leak", NEAR_FIELD_VERSION, variant, spec, settings.spp, settings.film_px, settings.seed)
+    label = f"housing-leak render ({side}, {housing} housing)"
+    leak, _ = _cached(cache, key, "leak", label, lambda: [_render_leak(spec, design.housing_depth_m, settings)])
+    return float(leak[0]) * spec["radius_m"] / design.housing_radius_m
+
+
+def _cached(cache: RenderCache | None, key: str, name: str, label: str, render) -> tuple[NDArray[np.float64], bool]:
+    """The array ``name`` stored under ``key``, or ``render()`` run, counted, logged and
+    stored; and whether it came from the cache."""
     cache = cache if cache is not None else RenderCache()
     stored = cache.load(key)
-    if stored is None:
-        leak = _render_leak(spec, design.housing_depth_m, settings)
-        STATS.renders += 1
-        cache.store(key, {"leak": np.array([leak])})
-    else:
-        leak = float(stored["leak"][0])
-    return leak * spec["radius_m"] / design.housing_radius_m
+    if stored is not None:
+        return stored[name], True
+    t0 = time.perf_counter()
+    value = np.asarray(render(), dtype=np.float64)
+    STATS.renders += 1
+    log.info("%s in %.1f s", label, time.perf_counter() - t0)
+    cache.store(key, {name: value})
+    return value, False
 
 
 def _render_leak(spec: dict, depth_m: float, settings: NearFieldSettings) -> float:
