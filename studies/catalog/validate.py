@@ -338,14 +338,16 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         f"mean |yaw error| {e1:.2f}° at 1 m vs {e5:.2f}° at 5 m",
     )
     weighted = frame[(frame.test == "weights") & (frame.rectification == "none") & frame.detected]
-    errors = {w: np.abs(weighted[weighted.weights == w].yaw_err_deg).mean() for w in ("tuned", "equal")}
-    testable = all(np.isfinite(e) for e in errors.values())
+    errors = {w: np.abs(weighted[weighted.weights == w].yaw_err_deg.dropna()) for w in ("tuned", "equal")}
+    counts = {w: len(e) for w, e in errors.items()}
+    testable = min(counts.values()) >= 3  # fewer frames cannot tell two means apart
     verdict(
         "Tuning the QUEST weights to (0.05, 0.05, 0.45, 0.45) improved the attitude over equal weights",
-        bool(errors["tuned"] < errors["equal"]) if testable else None,
-        f"mean |yaw error| at 1 m: tuned {errors['tuned']:.2f}°, equal {errors['equal']:.2f}°"
+        bool(errors["tuned"].mean() < errors["equal"].mean()) if testable else None,
+        f"mean |yaw error| at 1 m: tuned {errors['tuned'].mean():.2f}° ({counts['tuned']} frames), "
+        f"equal {errors['equal'].mean():.2f}° ({counts['equal']} frames)"
         if testable
-        else "no detections at 1 m to compare the weights on",
+        else f"too few detections at 1 m to compare the weights on ({counts['tuned']} tuned, {counts['equal']} equal)",
     )
     return out
 

@@ -21,7 +21,7 @@ with the others at their nominal; each point is scored on every side with ``seed
 seeds. Outputs: ``samples.csv`` (one row per point: the values, per-side successes,
 ``consistent``) and ``summary.json`` (how many points are consistent and, per unknown, its
 prior range against the range of the consistent points: which the calibration pins down
-and which it leaves wide).
+and which it leaves wide; not judged from fewer than 8 consistent points).
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ def summarise(table: pd.DataFrame, space: dict[str, Unknown], samples: int, seed
             found = sorted(set(ok[name]), key=str)
         else:
             found = [float(ok[name].min()), float(ok[name].max())]
-        unknowns[name] = {"prior": prior, "consistent": found, "pinned": _pinned(u, found)}
+        unknowns[name] = {"prior": prior, "consistent": found, "pinned": _pinned(u, found, len(ok))}
     return {
         "condition": CLOSE_RANGE,
         "samples": samples,
@@ -125,9 +125,15 @@ def summarise(table: pd.DataFrame, space: dict[str, Unknown], samples: int, seed
     }
 
 
-def _pinned(u: Unknown, found) -> bool | None:
-    """Whether the consistent points occupy clearly less than the prior (None: no consistent point)."""
-    if found is None:
+MIN_POINTS_TO_JUDGE = 8
+"""Fewer consistent points than this cannot say whether an unknown is pinned down: the
+spread of a handful of points is narrow by chance."""
+
+
+def _pinned(u: Unknown, found, points: int) -> bool | None:
+    """Whether the consistent points occupy clearly less than the prior (None: too few
+    consistent points to tell, see :data:`MIN_POINTS_TO_JUDGE`)."""
+    if found is None or points < MIN_POINTS_TO_JUDGE:
         return None
     if u.kind == "choice":
         return len(found) < len(u.choices)
