@@ -346,6 +346,9 @@ def load_camera(name: str) -> Camera:
     if processing not in profiles and processing != "legacy":
         raise ValueError(f"isp.processing: expected one of {', '.join(profiles) or 'legacy'}, got {processing!r}")
     pp = profiles.get(processing, {})
+    # the noise-reduction strengths belong to the body: kept whichever option is chosen, so a run
+    # can switch noise reduction on by itself (camera override "isp.noise_reduction")
+    nr = next((p for p in (pp, *profiles.values()) if "nr_analog_gain" in p), {})
     isp = ISPModel(
         demosaic=i["demosaic"],
         white_balance=i["white_balance"],
@@ -357,9 +360,9 @@ def load_camera(name: str) -> Camera:
         processing=processing,
         highlight=pp.get("highlight", "clip"),
         noise_reduction=pp.get("noise_reduction", "none"),
-        nr_analog_gain=tuple(float(v) for v in pp.get("nr_analog_gain", ())),
-        nr_luma_h=tuple(float(v) for v in pp.get("nr_luma_h", ())),
-        nr_chroma_h=tuple(float(v) for v in pp.get("nr_chroma_h", ())),
+        nr_analog_gain=tuple(float(v) for v in nr.get("nr_analog_gain", ())),
+        nr_luma_h=tuple(float(v) for v in nr.get("nr_luma_h", ())),
+        nr_chroma_h=tuple(float(v) for v in nr.get("nr_chroma_h", ())),
         tone_contrast=float(pp.get("tone_contrast", 0.0)),
         sharpening_amount=float(pp.get("sharpening_amount", 0.0)),
         sharpening_sigma_px=float(pp.get("sharpening_sigma_px", 1.0)),

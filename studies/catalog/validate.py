@@ -15,11 +15,14 @@ and camera settings (T6 ISO 6400, 1/60 s; webcams automatic):
 Frames are the camera's whole saved frame (``full_frame``), which the study's tracker scales
 to 50 % (the T6) as the study processed them: every false blob a frame holds is there.
 
-Markers as built: foam + one sheet of matched paper; the dimmer's setting is unknown, so
-the LEDs run at the datasheet current. Red side unless the test says each colour.
-``validation.csv`` has one row per tested condition (means over seeds, with the lowest and
-highest value seen over the seeds: ``detected_low``/``high`` a Wilson 95 % interval); the
-report marks the study's headline conclusions agree/disagree from those rows.
+Markers as built: foam + one sheet of paper. What the study did not record (the dimmer's
+setting, paper colour, webcam, lens focus, glare, ISP, …) comes from the calibrated set of an
+unknowns search (``calibration``, :mod:`studies.catalog.unknowns_search`): every test runs at
+each of its points. Without one, the unknowns stay nominal (matched paper, the datasheet
+current). Red side unless the test says each colour. ``validation.csv`` has one row per
+tested condition (means over seeds and points; ``detected_low``/``high`` span the Wilson 95 %
+intervals of every point, i.e. an interval over the set and the seeds; ``points`` counts
+them); the report marks the study's headline conclusions agree/disagree from those rows.
 """
 
 from __future__ import annotations
@@ -31,10 +34,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.thesis_tracker import ThesisTrackerSettings, derive_hsv_ranges
+from camera_models.camera import load_camera
+from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, derive_hsv_ranges
 from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
+from studies.catalog.unknowns_search import WEBCAMS, apply_point, calibrated_set
+from studies.engine.colour_reach import HIGHLIGHTS, reach
 from studies.engine.frame import capture_frame
 from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
@@ -112,13 +118,30 @@ WEIGHT_VARIANTS = tuple(itertools.product(("tuned", "equal"), (None, {"alpha": 0
 """The weight experiment's detector settings: QUEST weights × rectification (none, alpha 0, alpha 1)."""
 
 
-def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int | None = None) -> list[dict]:
+def run(
+    out: Path,
+    quick: bool,
+    execution: Execution = Execution(),
+    seeds: int | None = None,
+    calibration: Path | None = None,
+    points: int | None = None,
+) -> list[dict]:
     """Run every test into ``out``; returns the validation rows.
 
     As the study did, the preliminary test's 150 mm captures set the colour thresholds
     (:func:`pipeline.thesis_tracker.derive_hsv_ranges`); the range and primary tests are
     then scored with the study's printed thresholds and with these derived ones.
+
+    ``calibration``: an unknowns search's ``samples.csv``; every test then runs at each of
+    ``points`` of its calibrated set (:func:`studies.catalog.unknowns_search.calibrated_set`;
+    default 2 quick, 4 full) and the intervals cover the set and the seeds. Without it, the
+    unknowns stay at their nominal values (one point).
     """
+    if points is not None and points < 1:
+        raise ValueError(f"points: expected an integer >= 1, got {points!r}")
+    calibrated, which = [None], "none: the unknowns at their nominal values"
+    if calibration is not None:
+        calibrated, which = calibrated_set(Path(calibration), points or (2 if quick else 4))
     pairs = test_conditions(quick)
     options = StudyOptions(
         cameras=("canon-t6-18mm",),
@@ -132,14 +155,18 @@ def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int |
         for test, cond in pairs:
             if test not in tests:
                 continue
-            for t in frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]):
-                t["full_frame"] = True  # the whole saved frame, as the study processed it
+            for t, point in itertools.product(
+                frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]), range(len(calibrated))
+            ):
+                t = {**t, "full_frame": True}  # the whole saved frame, as the study processed it
+                if calibrated[point] is not None:
+                    t = apply_point(t, calibrated[point])
                 if variants:
                     t["thesis_hsv_variants"] = variants
                 settings = WEIGHT_VARIANTS if test == "weights" else (("tuned", None),)
                 for weights, rectification in settings:
                     label = "none" if rectification is None else f"alpha {rectification['alpha']:g}"
-                    task = {**t, "tags": {"test": test, "weights": weights, "rectification": label}}
+                    task = {**t, "tags": {"test": test, "weights": weights, "rectification": label, "point": point}}
                     if weights != "tuned":
                         task["quest_weights"] = weights
                     if rectification is not None:
@@ -165,8 +192,8 @@ def run(out: Path, quick: bool, execution: Execution = Execution(), seeds: int |
         for label, boxes in (("study", study_boxes), ("derived", derived))
         for v in conclusions(table, frame, label, boxes)
     ]
-    _report(out, table, verdicts, derived, flux)
-    summary = {"study": NAME, "conclusions": verdicts, "derived_thresholds": derived}
+    _report(out, table, verdicts, derived, flux, which)
+    summary = {"study": NAME, "calibrated_set": which, "conclusions": verdicts, "derived_thresholds": derived}
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
     return table.to_dict("records")
 
@@ -184,22 +211,25 @@ def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
     return out
 
 
-def validation_table(frame):
-    """One row per tested condition (means over seeds)."""
+CONDITION_KEYS = [
+    "test", "thresholds", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg",
+    "weights", "rectification",
+]  # fmt: skip
 
-    keys = [
-        "test", "thresholds", "camera", "beacon", "side", "environment", "nominal_range_m", "nominal_yaw_deg",
-        "weights", "rectification",
-    ]  # fmt: skip
-    out = []
-    for key, g in frame.groupby(keys, sort=False):
-        rec = dict(zip(keys, key, strict=True))
+
+def validation_table(frame):
+    """One row per tested condition: means over the seeds and the calibrated points, intervals
+    over both (:func:`_over_points`)."""
+    frame = frame.assign(point=frame["point"] if "point" in frame else 0)
+    per_point = []
+    for key, g in frame.groupby([*CONDITION_KEYS, "point"], sort=False):
+        rec = dict(zip([*CONDITION_KEYS, "point"], key, strict=True))
         recs = g.to_dict("records")
         detected = [bool(r["detected"]) for r in recs]
         # merged or lost: not detected, and the tracker found fewer than five blobs of the side's colour
         merged = [not r["detected"] and not (r["side_blobs"] >= 5) for r in recs]
         colour_ok = [bool(r["side_correct"]) for r in recs if r["detected"]]
-        out.append(
+        per_point.append(
             {
                 "test": rec["test"],
                 "camera": rec["camera"],
@@ -220,11 +250,11 @@ def validation_table(frame):
                 **_intervals(detected, g),
             }
         )
-    return pd.DataFrame(out)
+    return _over_points(pd.DataFrame(per_point))
 
 
 def _intervals(detected: list[bool], g) -> dict:
-    """The evidence behind a condition's means: a Wilson 95 % interval of the detected
+    """The evidence behind one point's means: a Wilson 95 % interval of the detected
     fraction, and the lowest and highest range and yaw estimate over its frames."""
     _, low, high = wilson_interval(int(sum(detected)), len(detected))
     out = {"detected_low": low, "detected_high": high}
@@ -233,6 +263,21 @@ def _intervals(detected: list[bool], g) -> dict:
         out[f"{name}_low"] = float(column.min()) if len(column) else np.nan
         out[f"{name}_high"] = float(column.max()) if len(column) else np.nan
     return out
+
+
+def _over_points(per_point: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the same condition at different calibrated points as one: means of the
+    fractions and estimates (each point weighs the same), the lowest ``*_low`` and highest
+    ``*_high`` (an interval over the set and the seeds), and ``points``, how many."""
+    keys = ["test", "thresholds", "camera", "beacon", "side", "environment", "range_m", "yaw_deg", "weights"]
+    keys.append("rectification")
+    lows = [c for c in per_point if c.endswith("_low")]
+    highs = [c for c in per_point if c.endswith("_high")]
+    means = [c for c in per_point if c not in keys + lows + highs]
+    agg = {**{c: "mean" for c in means}, **{c: "min" for c in lows}, **{c: "max" for c in highs}}
+    out = per_point.groupby(keys, sort=False, dropna=False).agg(agg).reset_index()
+    out["points"] = per_point.groupby(keys, sort=False, dropna=False).size().to_numpy()
+    return out[[*per_point.columns, "points"]]
 
 
 def v1_vs_v2(render: dict) -> pd.DataFrame:
@@ -273,24 +318,34 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     frame = frame[frame.thresholds == thresholds]
     prim = table[(table.test == "primary") & (table.camera == "canon-t6-18mm")]
     rng = table[table.test == "range"]
-    web = rng[rng.camera == "logitech-c270"]
+    web = rng[rng.camera.isin(WEBCAMS)]
     dslr = rng[rng.camera == "canon-t6-18mm"]
     out = []
 
-    def verdict(claim, ok, evidence):
+    def verdict(claim, ok, evidence, reason="", flip=""):
         out.append(
             {
                 "thresholds": thresholds,
                 "conclusion": claim,
                 "simulation": "no evidence" if ok is None else ("agree" if ok else "disagree"),
                 "evidence": evidence,
+                "reason": reason if ok is False else "",
+                "would_flip": flip if ok is False else "",
             }
         )
 
+    t6_colour = _colour_reach_note("canon-t6-18mm", prim.side.unique() if len(prim) else ("red",), hsv)
     verdict(
         "The DSLR (18 mm) detected the markers up to 5 m and 30°",
         bool(len(prim)) and prim.detected_fraction.min() >= 0.5,
-        f"primary test detected fraction {prim.detected_fraction.min():.2f}-{prim.detected_fraction.max():.2f}",
+        f"primary test detected fraction {prim.detected_fraction.min():.2f}-{prim.detected_fraction.max():.2f} "
+        f"(over the set and seeds {prim.detected_low.min():.2f}-{prim.detected_high.max():.2f})"
+        if len(prim)
+        else "not tested",
+        f"{_failures(frame[frame.test == 'primary'])}; {t6_colour}",
+        "the side that faced the camera (not stated; the T6 renders the blue and yellow LEDs into their boxes at "
+        "every setting, `beacon-sim colour-reach`) or a Canon highlight rendering that turns clipped red cores "
+        "pale violet-pink rather than yellow-white",
     )
     det = prim[prim.detected_fraction > 0]
     tested = set(prim.side) | set(rng.side)
@@ -304,29 +359,40 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "…and could tell their colours",
         bool(len(det)) and det.colour_correct_fraction.min() >= 0.9 and not overlap,
         evidence,
+        "the printed boxes overlap (red and blue share hues 84-180)" if overlap else t6_colour,
+        "thresholds whose boxes do not overlap" if overlap else "as above: the side that faced the camera",
     )
     verdict(
         "The webcams over-exposed the LEDs",
         bool(len(web)) and web.core_saturation.min() >= 0.5,
-        f"C270 marker cores clipped {web.core_saturation.min():.0%}-{web.core_saturation.max():.0%}",
+        f"webcam marker cores clipped {web.core_saturation.min():.0%}-{web.core_saturation.max():.0%}",
+        "the calibrated dimmer settings leave most webcam marker cores below the clip level",
+        "the LED drive (led_drive_*): a dimmer turned up clips the cores",
     )
     far = web[web.range_m >= 5]
     verdict(
         "…and could not tell the colours at range",
         bool(len(far)) and (far.detected_fraction * far.colour_correct_fraction).max() < 0.5,
-        f"C270 at ≥ 5 m: correct-colour detections {(far.detected_fraction * far.colour_correct_fraction).max():.2f}",
+        f"webcam at ≥ 5 m: correct-colour detections {(far.detected_fraction * far.colour_correct_fraction).max():.2f}",
+        f"the webcams' markers stay in their boxes at range ({_failures(frame[frame.camera.isin(WEBCAMS)])})",
+        "the LED drive and the webcam's highlight handling (highlight_mode): cores that clip leave their box",
     )
     beyond = dslr[dslr.range_m > 5]
     verdict(
         "The planned 10 m was not reached (DSLR detections stop beyond 5 m)",
         bool(len(beyond)) and beyond.detected_fraction.max() < 0.5,
         f"DSLR detected fraction at 7-10 m: {beyond.detected_fraction.max():.2f}" if len(beyond) else "not tested",
+        "the markers stay apart and in their boxes beyond 5 m",
+        "veiling glare (glare_on, veiling_glare_18mm) merges the markers; focus (focus_distance) shrinks them",
     )
     lost = rng[rng.range_m >= 7]
+    far_frames = frame.nominal_range_m >= 7
     verdict(
         "Resolution and blob merging limit the range",
         bool(len(lost)) and lost.merged_or_lost_fraction.mean() >= 0.5,
         f"merged-or-lost fraction at 7-10 m: {lost.merged_or_lost_fraction.mean():.2f}",
+        f"frames at 7-10 m that fail do so otherwise: {_failures(frame[(frame.test == 'range') & far_frames])}",
+        "veiling glare (glare_on) and the LED drive: brighter halos merge neighbouring markers",
     )
     near, far_p = prim[prim.range_m <= 1], prim[prim.range_m >= 5]
     err = frame[(frame.test == "primary") & frame.detected]
@@ -336,6 +402,9 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "QUEST attitude degrades at longer range",
         bool(e5 > e1) if np.isfinite(e1) and np.isfinite(e5) else None,  # no detections at one end: no evidence
         f"mean |yaw error| {e1:.2f}° at 1 m vs {e5:.2f}° at 5 m",
+        "the attitude error does not grow with range among the detected frames",
+        "blob-centroid bias of the erosion (fixed) grows relative to the shrinking marker spacing; more detections "
+        "at 5 m would test it",
     )
     weighted = frame[(frame.test == "weights") & (frame.rectification == "none") & frame.detected]
     errors = {w: np.abs(weighted[weighted.weights == w].yaw_err_deg.dropna()) for w in ("tuned", "equal")}
@@ -348,11 +417,48 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         f"equal {errors['equal'].mean():.2f}° ({counts['equal']} frames)"
         if testable
         else f"too few detections at 1 m to compare the weights on ({counts['tuned']} tuned, {counts['equal']} equal)",
+        "with the study's own pixel-to-angle model the out-of-plane pairs carry no more attitude information",
+        "the centroid noise of markers 2-3 against 4-5 (the LED drive of each side)",
     )
     return out
 
 
-def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.DataFrame) -> None:
+def _failures(frame) -> str:
+    """The commonest failure codes of the frames not detected, with counts."""
+    failed = frame[~frame.detected.astype(bool)] if len(frame) else frame
+    if not len(failed):
+        return "no frame failed"
+    counts = failed.failure.replace("", "none").value_counts()
+    top = ", ".join(f"{code} {n}" for code, n in counts.head(2).items())
+    return f"failures: {top} of {len(failed)} undetected of {len(frame)} frames"
+
+
+def _colour_reach_note(camera: str, sides, hsv: dict | None = None) -> str:
+    """Whether the camera can render each tested side's LED into its box (``hsv``, default the
+    study's), at any exposure, highlight mode and paper (:mod:`studies.engine.colour_reach`), in words."""
+    cam = load_camera(camera)
+    boxes = {c: [tuple(map(tuple, b)) for b in v] for c, v in hsv.items()} if hsv else STUDY_HSV_RANGES
+    notes = []
+    for side in sides:
+        hits = {
+            (hl, paper_colour): reach(
+                cam, side, paper_colour=paper_colour, overrides={"isp.highlight": hl}, ranges=boxes
+            ).span(side)
+            for hl in HIGHLIGHTS
+            for paper_colour in ("matched", "white")
+        }
+        ok = {k: v for k, v in hits.items() if v}
+        if not ok:
+            notes.append(f"the {camera} renders the {side} LED into its box at no exposure, highlight mode or paper")
+            continue
+        spans = "; ".join(
+            f"highlight {hl}, {p} paper: {lo:.2g}-{hi:.2g}× the clip level" for (hl, p), (lo, hi) in ok.items()
+        )
+        notes.append(f"the {camera} renders the {side} LED into its box only at ({spans})")
+    return "; ".join(notes) + " (`beacon-sim colour-reach`)"
+
+
+def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.DataFrame, calibrated: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -362,10 +468,11 @@ def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.Data
     rep.text(
         "Study tracker (HSV thresholds, morphology, exactly-5-blobs rule), inverse perspective and QUEST "
         "(Gibbs shortcut, weights 0.05/0.05/0.45/0.45); T6 at ISO 6400, 1/60 s; webcams automatic. Markers "
-        "as built: foam + 1 sheet of matched paper at the datasheet current (dimmer setting unknown). Each frame "
-        "is the camera's whole saved frame, scaled to 50 % for the T6 as the study processed it. Intervals: "
-        "detected_low/high is a Wilson 95 % interval over the frames of a condition (seeds only, not yet over "
-        "the unknowns); *_est_low/high are the lowest and highest estimate seen."
+        "as built: foam + 1 sheet of paper. Each frame is the camera's whole saved frame, scaled to 50 % for the "
+        f"T6 as the study processed it. Calibrated set (the unknowns, by `beacon-sim unknowns-search`): {calibrated}. "
+        "Intervals: detected_low/high spans the Wilson 95 % intervals over the seeds of every calibrated point "
+        "(the interval over the set and the seeds); *_est_low/high are the lowest and highest estimate seen; "
+        "`points` is how many calibrated points a row covers."
     )
     rep.text(
         "Colour thresholds: 'study' = the study's printed HSV ranges; 'derived' = the study's procedure "

@@ -8,21 +8,24 @@ import time
 from pathlib import Path
 from typing import Annotated
 
+import pandas as pd
 import typer
 from rich.console import Console
 from rich.table import Table
 
+from camera_models.camera import load_camera
 from scenes.mitsuba_variant import active_variant
 from scenes.render_cache import atomic_write_bytes
 from scenes.view import camera_names
+from studies.catalog import unknowns_search as search
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, prepare_out_dir, rich_progress
+from studies.engine import colour_reach as reach
 from studies.engine.sweep import Execution
 from studies.experiments import bench as b
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
-from studies.experiments import unknowns_search as search
 
 
 def e2e_detection(
@@ -104,6 +107,54 @@ def diffuser_mosaic(out: opt.Out) -> None:
     console.print(f"wrote {out}/diffuser_mosaic.png and diffuser_mosaic.json")
 
 
+def colour_reach(
+    out: opt.Out,
+    camera: Annotated[
+        list[str] | None, typer.Option("--camera", help="Camera model (repeat for several; default all four).")
+    ] = None,
+) -> None:
+    """Which of the study's colour boxes each camera's rendering of each LED can enter at any exposure (no render).
+
+    Sweeps highlight mode, white balance, crosstalk, paper and the LED's wavelength bin
+    (studies/engine/colour_reach.py). Writes reach.csv (one row per setting), summary.json
+    (per camera and side: whether any setting reaches the side's own box, and which) and
+    trajectories.png.
+    """
+    names = list(camera) if camera else camera_names()
+    for name in names:
+        if name not in camera_names():
+            raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    prepare_out_dir(out)
+    cameras = {n: load_camera(n) for n in names}
+    with console.status("colour curves of every camera, LED and setting ..."):
+        table = pd.DataFrame(reach.reach_table(cameras))
+        reach.trajectory_figure(cameras, out / "trajectories.png")
+    summary = {}
+    for (cam, side), g in table.groupby(["camera", "side"], sort=False):
+        ok = g[g.own_box]
+        summary.setdefault(cam, {})[side] = {
+            "reachable": bool(len(ok)),
+            "settings_tried": len(g),
+            "settings_reaching": len(ok),
+            **{k: sorted(set(ok[k]), key=str) for k in ("highlight", "white_balance", "crosstalk", "paper_colour")},
+            "exposure_range": [float(ok.own_low.min()), float(ok.own_high.max())] if len(ok) else None,
+        }
+    atomic_write_bytes(out / "reach.csv", table.to_csv(index=False, float_format="%.4g").encode())
+    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
+    t = Table("camera", "side", "own box reached", "with")
+    for cam, sides in summary.items():
+        for side, v in sides.items():
+            got = f"{v['settings_reaching']} of {v['settings_tried']} settings" if v["reachable"] else "never"
+            how = (
+                ""
+                if not v["reachable"]
+                else f"highlight {'/'.join(v['highlight'])}, paper {'/'.join(v['paper_colour'])}"
+            )
+            t.add_row(cam, side, got, how)
+    Console().print(t)
+    console.print(f"wrote {out}/reach.csv, summary.json and trajectories.png")
+
+
 def bench(
     json_out: opt.Json = False,
     skip_scalar: Annotated[bool, typer.Option("--skip-scalar", help="Skip the slow scalar-variant timing.")] = False,
@@ -180,7 +231,7 @@ def unknowns_search(
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
 ) -> None:
-    """Which values of the unknowns let the study's printed detector see every colour at close range (T6, 1 m)."""
+    """Which unknowns let the study's printed detector see every colour at close range (webcam 150 mm, T6 1 m)."""
     if samples < 1 or seeds < 1:
         raise UsageError(f"samples, seeds: expected integers >= 1, got {samples}, {seeds}")
     if workers is not None and workers < 1:
@@ -200,4 +251,5 @@ COMMANDS = {
     "diffuser-mosaic": diffuser_mosaic,
     "bench": bench,
     "unknowns-search": unknowns_search,
+    "colour-reach": colour_reach,
 }

@@ -11,6 +11,7 @@ import typer
 
 from studies.catalog import MAIN_JOB, STUDIES
 from studies.catalog import validate as validation
+from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, parse_list, prepare_out_dir, rich_progress
 from studies.engine.report import Report
@@ -56,16 +57,36 @@ def validate(
     out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
     quick: Annotated[bool, typer.Option("--quick", help="Fewer conditions and seeds.")] = False,
     seeds: opt.Seeds = None,
+    calibration: Annotated[
+        Path,
+        typer.Option(
+            "--calibration",
+            help="samples.csv of an unknowns search: predict from its calibrated set.",
+            show_default="results/unknowns-search/samples.csv",
+        ),
+    ] = REFERENCE_SEARCH,
+    nominal: Annotated[bool, typer.Option("--nominal", help="Ignore --calibration: the unknowns at nominal.")] = False,
+    points: Annotated[
+        int | None, typer.Option("--points", help="Calibrated points to run each test at [default: 2 quick, 4 full].")
+    ] = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
     """Predict the source study's tests with its own detector and settings (validation.csv, report.html)."""
     if seeds is not None and seeds < 1:
         raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    if points is not None and points < 1:
+        raise UsageError(f"points: expected an integer >= 1, got {points}")
+    if not nominal and not calibration.is_file():
+        raise UsageError(f"calibration: expected an unknowns-search samples.csv, {calibration} is not a file")
+    try:
+        calibrated_set(calibration) if not nominal else None
+    except ValueError as e:
+        raise UsageError(str(e)) from None
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    validation.run(out, quick, execution, seeds=seeds)
+    validation.run(out, quick, execution, seeds=seeds, calibration=None if nominal else calibration, points=points)
     console.print(f"validate: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
 
 

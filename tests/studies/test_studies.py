@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from studies.catalog import brightness_diffuser, range_limit, replication, validate, webcam_vs_dslr
+from studies.engine.metrics import wilson_interval
 from studies.engine.sweep import Execution
 
 pytestmark = pytest.mark.usefixtures("mitsuba_variant")
@@ -98,8 +99,9 @@ def test_validate_tiny(tmp_path, monkeypatch):
     ]
     assert list(table.columns[12:]) == [
         "core_saturation", "thresholds", "weights", "rectification", "detected_low", "detected_high",
-        "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high",
+        "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high", "points",
     ]  # fmt: skip
+    assert (table.points == 1).all()  # no calibration: the unknowns at nominal, one point
     assert (table.detected_low <= table.detected_fraction).all() and (
         table.detected_fraction <= table.detected_high
     ).all()
@@ -120,6 +122,26 @@ def test_validate_tiny(tmp_path, monkeypatch):
     assert {v["thresholds"] for v in verdicts} == {"study", "derived"}
     assert all(v["simulation"] in ("agree", "disagree", "no evidence") for v in verdicts)
     assert any("QUEST weights" in v["conclusion"] for v in verdicts)
+
+
+def test_validation_table_spans_the_calibrated_points():
+    base = {
+        "test": "primary", "thresholds": "study", "camera": "canon-t6-18mm", "beacon": "v2", "side": "red",
+        "environment": "dark-room", "nominal_range_m": 3.0, "nominal_yaw_deg": 0.0, "weights": "tuned",
+        "rectification": "none", "side_blobs": 5, "core_saturated_fraction_mean": 0.5, "yaw_est_deg": 1.0,
+    }  # fmt: skip
+    frames = [  # point 0: 4 of 4 detected; point 1: 1 of 4
+        {**base, "point": p, "detected": d, "side_correct": d, "range_est_m": r if d else np.nan}
+        for p, ds, r in ((0, [True] * 4, 3.1), (1, [True, False, False, False], 2.5))
+        for d in ds
+    ]
+    table = validate.validation_table(pd.DataFrame(frames))
+    assert len(table) == 1
+    row = table.iloc[0]
+    assert row.points == 2 and row.detected_fraction == pytest.approx((1.0 + 0.25) / 2)
+    assert row.detected_low == pytest.approx(wilson_interval(1, 4)[1])  # the worse point's lower bound
+    assert row.detected_high == pytest.approx(wilson_interval(4, 4)[2])
+    assert (row.range_est_low, row.range_est_high) == (2.5, 3.1)
 
 
 def _tiny_options(**kw):

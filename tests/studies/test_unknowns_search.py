@@ -1,4 +1,4 @@
-"""The close-range search over the unknowns: tasks, scoring and the summary on a tiny run."""
+"""The close-range search over the unknowns: its space, tasks, scoring, summary and calibrated set."""
 
 from __future__ import annotations
 
@@ -6,34 +6,90 @@ import pandas as pd
 import pytest
 
 from scenes.led import SIDE_COLOURS
+from studies.catalog import unknowns_search
 from studies.engine.sweep import Execution
-from studies.engine.unknowns import load_unknowns
-from studies.experiments import unknowns_search
+from studies.engine.unknowns import load_unknowns, sample
 
 
-def test_search_space_holds_the_build_and_scopes_to_the_t6():
+def test_search_space_has_a_drive_per_beacon_side_and_the_tuning_webcam():
     space = unknowns_search.search_space()
-    assert {"housing", "paper_colour", "noise_reduction"} <= {n for n, u in space.items() if u.kind == "fixed"}
-    assert "webcam_max_exposure" not in space and "led_drive" in space and "focus_distance" in space
-    assert all(u.namespace != "data" for u in space.values())
-    points = [{n: u.nominal for n, u in space.items()}]
-    tasks = unknowns_search.tasks(points, space, seeds=2)
-    assert len(tasks) == len(SIDE_COLOURS) * 2
-    assert {t["scenario"]["side"] for t in tasks} == set(SIDE_COLOURS) and all(t["align_px"] == 16 for t in tasks)
-    assert tasks[0]["scenario"]["led_current_mA"] == load_unknowns()["led_drive"].nominal
+    drives = {f"led_drive_{b}_{s}" for b in ("v1", "v2") for s in SIDE_COLOURS}
+    assert drives <= set(space) and "led_drive" not in space
+    assert {"tuning_webcam", "webcam_max_exposure", "focus_distance", "housing", "paper_colour"} <= set(space)
+    assert "veiling_glare_10mm" not in space  # the 10 mm lens is in no close-range condition
+    assert all(u.namespace != "data" for u in space.values()) and all(u.kind != "fixed" for u in space.values())
 
 
-def test_tiny_search_scores_every_point_on_every_side(tmp_path, monkeypatch, mitsuba_variant):
+def test_tasks_take_their_own_sides_drive_and_the_point_s_webcam():
+    space = unknowns_search.search_space()
+    point = {n: u.nominal for n, u in space.items()}
+    point |= {f"led_drive_v1_{s}": 0.1 * (i + 1) for i, s in enumerate(SIDE_COLOURS)}
+    point |= {f"led_drive_v2_{s}": 1.0 * (i + 1) for i, s in enumerate(SIDE_COLOURS)}
+    point["tuning_webcam"] = "spedal-920"
+    tasks = unknowns_search.tasks([point], space, seeds=2)
+    assert len(tasks) == len(unknowns_search.CONDITIONS) * len(SIDE_COLOURS) * 2
+    for t in tasks:
+        sc = t["scenario"]
+        i = SIDE_COLOURS.index(sc["side"])
+        assert sc["led_current_mA"] == pytest.approx((0.1 if sc["beacon"] == "v1" else 1.0) * (i + 1))
+        if t["tags"]["condition"] == "webcam-150mm":
+            assert sc["camera"] == "spedal-920" and t["full_frame"] and sc["range_m"] == 0.15
+        else:
+            assert sc["camera"] == "canon-t6-18mm" and t["align_px"] == 16 and "lens.f_number" in t["camera_overrides"]
+
+
+def _samples_csv(path, consistent_tuning, consistent_all):
+    space = unknowns_search.search_space()
+    table = pd.DataFrame(sample(space, len(consistent_tuning), seed=3))
+    table["consistent_webcam-150mm"] = consistent_tuning
+    table["consistent"] = consistent_all
+    table.to_csv(path, index=False)
+    return table
+
+
+def test_calibrated_set_prefers_every_condition_then_the_tuning_one(tmp_path):
+    csv = tmp_path / "samples.csv"
+    table = _samples_csv(csv, [True, False, True, True], [False, False, True, False])
+    points, which = unknowns_search.calibrated_set(csv)
+    assert len(points) == 1 and points[0]["focus_distance"] == pytest.approx(table.focus_distance[2])
+    assert "every close-range condition" in which
+    table = _samples_csv(csv, [True, False, True, True], [False] * 4)
+    points, which = unknowns_search.calibrated_set(csv, limit=2)
+    assert [p["focus_distance"] for p in points] == pytest.approx(list(table.focus_distance[[0, 3]]))
+    assert which.startswith("2 of 3 points consistent at webcam-150mm")
+    assert isinstance(points[0]["glare_on"], bool)
+    task = unknowns_search.apply_point(
+        {"scenario": {"beacon": "v2", "side": "blue", "camera": "canon-t6-18mm"}, "seed": 0}, points[0]
+    )
+    assert task["scenario"]["led_current_mA"] == pytest.approx(points[0]["led_drive_v2_blue"])
+
+
+def test_calibrated_set_refuses_what_it_cannot_use(tmp_path):
+    csv = tmp_path / "samples.csv"
+    _samples_csv(csv, [False, False], [False, False])
+    with pytest.raises(ValueError, match="no point is consistent at webcam-150mm"):
+        unknowns_search.calibrated_set(csv)
+    pd.DataFrame({"x": [1]}).to_csv(csv, index=False)
+    with pytest.raises(ValueError, match="missing column 'consistent'"):
+        unknowns_search.calibrated_set(csv)
+
+
+def test_tiny_search_scores_every_point_on_every_condition_and_side(tmp_path, monkeypatch, mitsuba_variant):
     monkeypatch.setattr(
         unknowns_search, "RENDER", {"spp": 1, "oversampling": 1, "crop": "target", "near_field_spp": 16}
     )
     summary = unknowns_search.run(tmp_path, samples=2, seeds=1, execution=Execution(workers=1))
     table = pd.read_csv(tmp_path / "samples.csv")
     assert len(table) == 2
-    expected = table[[f"{s}_detected" for s in SIDE_COLOURS]].all(axis=1)
-    assert list(table.consistent) == list(expected)
-    assert summary["consistent_points"] == int(expected.sum())
-    assert summary["per_side_detected"] == {s: int(table[f"{s}_detected"].sum()) for s in SIDE_COLOURS}
-    led = summary["unknowns"]["led_drive"]
-    assert led["prior"] == pytest.approx([0.05, 20.0])
-    assert summary["unknowns"]["housing"] == {"held_at": "black"}
+    for name in unknowns_search.CONDITIONS:
+        expected = table[[f"{name}_{s}" for s in SIDE_COLOURS]].all(axis=1)
+        assert list(table[f"consistent_{name}"]) == list(expected)
+        got = summary["conditions"][name]
+        assert got["consistent_points"] == int(expected.sum())
+        assert got["per_side_detected"] == {s: int(table[f"{name}_{s}"].sum()) for s in SIDE_COLOURS}
+    both = table[[f"consistent_{n}" for n in unknowns_search.CONDITIONS]].all(axis=1)
+    assert list(table.consistent) == list(both) and summary["consistent_points"] == int(both.sum())
+    t6 = summary["conditions"]["t6-1m"]["unknowns"]
+    assert "led_drive_v2_red" in t6 and "led_drive_v1_red" not in t6 and "tuning_webcam" not in t6
+    assert t6["led_drive_v2_red"]["prior"] == pytest.approx([0.05, 20.0])
+    assert load_unknowns()["led_drive"].low == 0.05
