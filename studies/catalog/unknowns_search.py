@@ -179,6 +179,8 @@ def summarise(table: pd.DataFrame, space: dict[str, Unknown], samples: int, seed
             "unknowns": {n: _judge(u, ok) for n, u in space.items() if relevant(u, name)},
         }
     ok = table[table.consistent]
+    agree = table[[f"{c}_{s}" for c in CONDITIONS for s in SIDE_COLOURS]].astype(bool).sum(axis=1)
+    best = table[agree == agree.max()]
     return {
         "samples": samples,
         "seeds_per_side": seeds,
@@ -186,6 +188,12 @@ def summarise(table: pd.DataFrame, space: dict[str, Unknown], samples: int, seed
         "conditions": per_condition,
         "consistent_points": len(ok),
         "unknowns": {n: _judge(u, ok) for n, u in space.items()},
+        "best_agreeing": {
+            "observations": f"{int(agree.max())} of {len(CONDITIONS) * len(SIDE_COLOURS)} (condition × side)",
+            "points": len(best),
+            "which": [f"{c}_{s}" for c in CONDITIONS for s in SIDE_COLOURS if best[f"{c}_{s}"].any()],
+            "unknowns": {n: _judge(u, best) for n, u in space.items()},
+        },
     }
 
 
@@ -230,24 +238,33 @@ TUNING = "webcam-150mm"
 def calibrated_set(samples_csv: Path, limit: int | None = None) -> tuple[list[dict], str]:
     """The points a prediction is made from, read from a search's ``samples.csv``, and which set they are.
 
-    The points consistent with every close-range condition; when there are none, the points
-    consistent with :data:`TUNING`, where the study tuned (and the description says so).
-    ``limit`` keeps that many, spread evenly over the file's (Sobol') order. Raises
-    ``ValueError`` (naming the file) for a file that is not a search's output or has no
-    consistent point at the tuning condition.
+    In order of preference: the points consistent with every close-range condition; the points
+    consistent with :data:`TUNING`, where the study tuned; when neither exists, the points that
+    agree with the most close-range observations (condition × side), however few; the
+    description says which. ``limit`` keeps that many, spread evenly over the file's (Sobol')
+    order. Raises ``ValueError`` (naming the file) for a file that is not a search's output or
+    whose points agree with no observation at all.
     """
     table = pd.read_csv(samples_csv)
-    need = ["consistent", f"consistent_{TUNING}", *search_space()]
+    observations = [f"{c}_{s}" for c in CONDITIONS for s in SIDE_COLOURS]
+    need = ["consistent", f"consistent_{TUNING}", *observations, *search_space()]
     missing = [c for c in need if c not in table]
     if missing:
         raise ValueError(f"{samples_csv}: expected an unknowns-search samples.csv, missing column {missing[0]!r}")
+    agree = table[observations].astype(bool).sum(axis=1)
     if table.consistent.astype(bool).any():
         ok, which = table[table.consistent.astype(bool)], "consistent at every close-range condition"
-    else:
+    elif table[f"consistent_{TUNING}"].astype(bool).any():
         ok = table[table[f"consistent_{TUNING}"].astype(bool)]
         which = f"consistent at {TUNING}, where the study tuned (no point is consistent at every condition)"
-    if ok.empty:
-        raise ValueError(f"{samples_csv}: no point is consistent at {TUNING}; no calibrated set to predict from")
+    elif agree.max() > 0:
+        ok = table[agree == agree.max()]
+        which = (
+            f"agreeing with the most close-range observations, {agree.max()} of {len(observations)} "
+            "(condition × side): no point is consistent with a whole condition, so this set is not a calibration"
+        )
+    else:
+        raise ValueError(f"{samples_csv}: no point agrees with any close-range observation; nothing to predict from")
     points = [{k: _plain(v) for k, v in row.items()} for row in ok[list(search_space())].to_dict("records")]
     if limit is not None and len(points) > limit:
         points = [points[i] for i in np.linspace(0, len(points) - 1, limit).round().astype(int)]

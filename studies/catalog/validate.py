@@ -134,18 +134,19 @@ def run(
 
     ``calibration``: an unknowns search's ``samples.csv``; every test then runs at each of
     ``points`` of its calibrated set (:func:`studies.catalog.unknowns_search.calibrated_set`;
-    default 2 quick, 4 full) and the intervals cover the set and the seeds. Without it, the
+    default 2 quick, 3 full) and the intervals cover the set and the seeds. Without it, the
     unknowns stay at their nominal values (one point).
     """
     if points is not None and points < 1:
         raise ValueError(f"points: expected an integer >= 1, got {points!r}")
     calibrated, which = [None], "none: the unknowns at their nominal values"
     if calibration is not None:
-        calibrated, which = calibrated_set(Path(calibration), points or (2 if quick else 4))
+        calibrated, which = calibrated_set(Path(calibration), points or (2 if quick else 3))
     pairs = test_conditions(quick)
+    Path(out).mkdir(parents=True, exist_ok=True)
     options = StudyOptions(
         cameras=("canon-t6-18mm",),
-        seeds=seeds or (2 if quick else 5),
+        seeds=seeds or (2 if quick else 3),
         jitter_poses=1,
         render={"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024},
     )
@@ -396,8 +397,8 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     )
     near, far_p = prim[prim.range_m <= 1], prim[prim.range_m >= 5]
     err = frame[(frame.test == "primary") & frame.detected]
-    e1 = float(np.nanmean(np.abs(err[err.nominal_range_m <= 1].yaw_err_deg))) if len(near) else np.nan
-    e5 = float(np.nanmean(np.abs(err[err.nominal_range_m >= 5].yaw_err_deg))) if len(far_p) else np.nan
+    e1 = float(err[err.nominal_range_m <= 1].yaw_err_deg.abs().mean()) if len(near) else np.nan  # NaN: none
+    e5 = float(err[err.nominal_range_m >= 5].yaw_err_deg.abs().mean()) if len(far_p) else np.nan
     verdict(
         "QUEST attitude degrades at longer range",
         bool(e5 > e1) if np.isfinite(e1) and np.isfinite(e5) else None,  # no detections at one end: no evidence

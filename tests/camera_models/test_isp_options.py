@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from camera_models.camera import BODY_DIR, load_camera
+from camera_models.camera import BODY_DIR, load_camera, with_overrides
 from camera_models.isp import (
     camera_to_srgb_matrix,
     check_isp_options,
@@ -99,6 +99,22 @@ def test_process_applies_noise_reduction_at_the_frames_gain():
     assert np.array_equal(process(raw, nr, analog_gain=64.0).rgb8, reduce_noise(legacy, 3.0, 16.0))
     with pytest.raises(ValueError, match=r"^analog_gain: "):
         process(raw, nr)
+
+
+@pytest.mark.parametrize(
+    ("name", "body_name"), [("canon-t6-18mm", "canon-eos-1300d"), ("logitech-c270", "logitech-c270")]
+)
+def test_noise_reduction_switched_on_alone_uses_the_bodys_strengths(name, body_name):
+    # the unknowns registry turns noise reduction on by itself ("isp.noise_reduction"): the strengths by
+    # gain are the body's, the same whichever processing option is chosen
+    legacy = load_camera(name)
+    on = with_overrides(legacy, {"isp.noise_reduction": "nlmeans"})
+    body = load_sourced(BODY_DIR / f"{body_name}.toml")[0]["isp"]["processing_options"]["in-camera"]
+    assert on.isp.nr_analog_gain == tuple(body["nr_analog_gain"]) and on.isp.highlight == legacy.isp.highlight
+    gain = body["nr_analog_gain"][-1]
+    raw = _seeded_raw(legacy)[:64]
+    expected = reduce_noise(process(raw, legacy).rgb8, body["nr_luma_h"][-1], body["nr_chroma_h"][-1])
+    assert np.array_equal(process(raw, on, analog_gain=gain).rgb8, expected)
 
 
 def test_noise_reduction_lowers_chroma_noise_of_a_flat_patch():

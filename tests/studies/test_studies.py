@@ -9,9 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from studies.catalog import brightness_diffuser, range_limit, replication, validate, webcam_vs_dslr
+from studies.catalog import brightness_diffuser, range_limit, replication, unknowns_search, validate, webcam_vs_dslr
 from studies.engine.metrics import wilson_interval
 from studies.engine.sweep import Execution
+from studies.engine.unknowns import sample
 
 pytestmark = pytest.mark.usefixtures("mitsuba_variant")
 TINY = {"spp": 2, "oversampling": 1, "crop": "target", "near_field_spp": 64}
@@ -122,6 +123,30 @@ def test_validate_tiny(tmp_path, monkeypatch):
     assert {v["thresholds"] for v in verdicts} == {"study", "derived"}
     assert all(v["simulation"] in ("agree", "disagree", "no evidence") for v in verdicts)
     assert any("QUEST weights" in v["conclusion"] for v in verdicts)
+
+
+def test_validate_runs_every_test_at_each_calibrated_point(tmp_path, monkeypatch):
+    space = unknowns_search.search_space()
+    table = pd.DataFrame(sample(space, 2, seed=5))
+    for c in unknowns_search.CONDITIONS:
+        for side in ("red", "green", "blue", "yellow"):
+            table[f"{c}_{side}"] = True
+        table[f"consistent_{c}"] = True
+    table["consistent"] = True
+    table.to_csv(tmp_path / "samples.csv", index=False)
+    primary = next(p for p in validate.test_conditions(True) if p[0] == "primary")
+    monkeypatch.setattr(validate, "test_conditions", lambda quick: [primary])
+    monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
+    monkeypatch.setattr(validate, "v1_vs_v2", lambda render: pd.DataFrame({"beacon": [], "side_to_centre_flux": []}))
+    out = tmp_path / "out"
+    validate.run(out, True, Execution(workers=1), seeds=1, calibration=tmp_path / "samples.csv")
+    frames = pd.read_csv(out / "results.csv")
+    assert sorted(set(frames.point)) == [0, 1]
+    assert sorted(frames.led_current_mA.unique()) == pytest.approx(sorted(table.led_drive_v2_red))
+    rows = pd.read_csv(out / "validation.csv")
+    assert (rows.points == 2).all() and len(rows) == 2  # study and derived thresholds
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["calibrated_set"].startswith("2 of 2 points consistent at every close-range condition")
 
 
 def test_validation_table_spans_the_calibrated_points():

@@ -38,9 +38,11 @@ def test_tasks_take_their_own_sides_drive_and_the_point_s_webcam():
             assert sc["camera"] == "canon-t6-18mm" and t["align_px"] == 16 and "lens.f_number" in t["camera_overrides"]
 
 
-def _samples_csv(path, consistent_tuning, consistent_all):
+def _samples_csv(path, consistent_tuning, consistent_all, agree=None):
     space = unknowns_search.search_space()
     table = pd.DataFrame(sample(space, len(consistent_tuning), seed=3))
+    for i, (c, s) in enumerate((c, s) for c in unknowns_search.CONDITIONS for s in SIDE_COLOURS):
+        table[f"{c}_{s}"] = [i < a for a in (agree or [0] * len(table))]
     table["consistent_webcam-150mm"] = consistent_tuning
     table["consistent"] = consistent_all
     table.to_csv(path, index=False)
@@ -62,12 +64,16 @@ def test_calibrated_set_prefers_every_condition_then_the_tuning_one(tmp_path):
         {"scenario": {"beacon": "v2", "side": "blue", "camera": "canon-t6-18mm"}, "seed": 0}, points[0]
     )
     assert task["scenario"]["led_current_mA"] == pytest.approx(points[0]["led_drive_v2_blue"])
+    table = _samples_csv(csv, [False] * 4, [False] * 4, agree=[2, 5, 0, 5])  # no whole condition anywhere
+    points, which = unknowns_search.calibrated_set(csv)
+    assert [p["focus_distance"] for p in points] == pytest.approx(list(table.focus_distance[[1, 3]]))
+    assert "5 of 8 (condition × side)" in which and "not a calibration" in which
 
 
 def test_calibrated_set_refuses_what_it_cannot_use(tmp_path):
     csv = tmp_path / "samples.csv"
     _samples_csv(csv, [False, False], [False, False])
-    with pytest.raises(ValueError, match="no point is consistent at webcam-150mm"):
+    with pytest.raises(ValueError, match="no point agrees with any close-range observation"):
         unknowns_search.calibrated_set(csv)
     pd.DataFrame({"x": [1]}).to_csv(csv, index=False)
     with pytest.raises(ValueError, match="missing column 'consistent'"):
