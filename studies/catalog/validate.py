@@ -134,19 +134,19 @@ def run(
 
     ``calibration``: an unknowns search's ``samples.csv``; every test then runs at each of
     ``points`` of its calibrated set (:func:`studies.catalog.unknowns_search.calibrated_set`;
-    default 2 quick, 3 full) and the intervals cover the set and the seeds. Without it, the
+    default 2) and the intervals cover the set and the seeds. Without it, the
     unknowns stay at their nominal values (one point).
     """
     if points is not None and points < 1:
         raise ValueError(f"points: expected an integer >= 1, got {points!r}")
     calibrated, which = [None], "none: the unknowns at their nominal values"
     if calibration is not None:
-        calibrated, which = calibrated_set(Path(calibration), points or (2 if quick else 3))
+        calibrated, which = calibrated_set(Path(calibration), points or 2)
     pairs = test_conditions(quick)
     Path(out).mkdir(parents=True, exist_ok=True)
     options = StudyOptions(
         cameras=("canon-t6-18mm",),
-        seeds=seeds or (2 if quick else 3),
+        seeds=seeds or 2,
         jitter_poses=1,
         render={"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024},
     )
@@ -324,6 +324,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     out = []
 
     def verdict(claim, ok, evidence, reason="", flip=""):
+        ok = None if ok is None else bool(ok)  # numpy booleans too
         out.append(
             {
                 "thresholds": thresholds,
@@ -360,21 +361,22 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "…and could tell their colours",
         bool(len(det)) and det.colour_correct_fraction.min() >= 0.9 and not overlap,
         evidence,
-        "the printed boxes overlap (red and blue share hues 84-180)" if overlap else t6_colour,
+        f"the {thresholds} boxes overlap ({', '.join(overlap)})" if overlap else t6_colour,
         "thresholds whose boxes do not overlap" if overlap else "as above: the side that faced the camera",
     )
     verdict(
         "The webcams over-exposed the LEDs",
         bool(len(web)) and web.core_saturation.min() >= 0.5,
         f"webcam marker cores clipped {web.core_saturation.min():.0%}-{web.core_saturation.max():.0%}",
-        "the calibrated dimmer settings leave most webcam marker cores below the clip level",
+        "the dimmer settings of the points used leave most webcam marker cores below the clip level",
         "the LED drive (led_drive_*): a dimmer turned up clips the cores",
     )
     far = web[web.range_m >= 5]
     verdict(
         "…and could not tell the colours at range",
         bool(len(far)) and (far.detected_fraction * far.colour_correct_fraction).max() < 0.5,
-        f"webcam at ≥ 5 m: correct-colour detections {(far.detected_fraction * far.colour_correct_fraction).max():.2f}",
+        f"webcam at ≥ 5 m: correct-colour detections {(far.detected_fraction * far.colour_correct_fraction).max():.2f} "
+        f"(detected at most {far.detected_high.max():.2f} over the set and seeds)",
         f"the webcams' markers stay in their boxes at range ({_failures(frame[frame.camera.isin(WEBCAMS)])})",
         "the LED drive and the webcam's highlight handling (highlight_mode): cores that clip leave their box",
     )
@@ -382,7 +384,10 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     verdict(
         "The planned 10 m was not reached (DSLR detections stop beyond 5 m)",
         bool(len(beyond)) and beyond.detected_fraction.max() < 0.5,
-        f"DSLR detected fraction at 7-10 m: {beyond.detected_fraction.max():.2f}" if len(beyond) else "not tested",
+        f"DSLR detected fraction at 7-10 m: {beyond.detected_fraction.max():.2f} (at most "
+        f"{beyond.detected_high.max():.2f} over the set and seeds)"
+        if len(beyond)
+        else "not tested",
         "the markers stay apart and in their boxes beyond 5 m",
         "veiling glare (glare_on, veiling_glare_18mm) merges the markers; focus (focus_distance) shrinks them",
     )
@@ -429,9 +434,9 @@ def _failures(frame) -> str:
     failed = frame[~frame.detected.astype(bool)] if len(frame) else frame
     if not len(failed):
         return "no frame failed"
-    counts = failed.failure.replace("", "none").value_counts()
+    counts = failed.failure.fillna("").replace("", "none").value_counts()
     top = ", ".join(f"{code} {n}" for code, n in counts.head(2).items())
-    return f"failures: {top} of {len(failed)} undetected of {len(frame)} frames"
+    return f"{len(failed)} of {len(frame)} frames undetected ({top})"
 
 
 def _colour_reach_note(camera: str, sides, hsv: dict | None = None) -> str:

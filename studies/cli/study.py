@@ -67,7 +67,7 @@ def validate(
     ] = REFERENCE_SEARCH,
     nominal: Annotated[bool, typer.Option("--nominal", help="Ignore --calibration: the unknowns at nominal.")] = False,
     points: Annotated[
-        int | None, typer.Option("--points", help="Calibrated points to run each test at [default: 2 quick, 3 full].")
+        int | None, typer.Option("--points", help="Calibrated points to run each test at [default: 2].")
     ] = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
