@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from studies.catalog import brightness_diffuser, range_limit, replication, unknowns_search, validate, webcam_vs_dslr
+from studies.catalog.unknowns_search import WEBCAMS
 from studies.engine.metrics import wilson_interval
 from studies.engine.sweep import Execution
 from studies.engine.unknowns import sample
@@ -127,15 +128,16 @@ def test_validate_tiny(tmp_path, monkeypatch):
 
 def test_validate_runs_every_test_at_each_calibrated_point(tmp_path, monkeypatch):
     space = unknowns_search.search_space()
-    table = pd.DataFrame(sample(space, 2, seed=5))
+    table = pd.DataFrame(sample(space, 2, seed=5)).assign(tuning_webcam="logitech-c270")  # one row per condition
     for c in unknowns_search.CONDITIONS:
         for side in ("red", "green", "blue", "yellow"):
             table[f"{c}_{side}"] = True
         table[f"consistent_{c}"] = True
     table["consistent"] = True
     table.to_csv(tmp_path / "samples.csv", index=False)
-    primary = next(p for p in validate.test_conditions(True) if p[0] == "primary")
-    monkeypatch.setattr(validate, "test_conditions", lambda quick: [primary])
+    # one webcam range condition: whole webcam frames are cheap (a T6 frame is 18 MP)
+    webcam = next(p for p in validate.test_conditions(True) if p[0] == "range" and p[1]["camera"] in WEBCAMS)
+    monkeypatch.setattr(validate, "test_conditions", lambda quick: [webcam])
     monkeypatch.setattr(validate, "StudyOptions", _tiny_options)
     monkeypatch.setattr(validate, "v1_vs_v2", lambda render: pd.DataFrame({"beacon": [], "side_to_centre_flux": []}))
     out = tmp_path / "out"

@@ -84,6 +84,9 @@ def test_tiny_search_scores_every_point_on_every_condition_and_side(tmp_path, mo
     monkeypatch.setattr(
         unknowns_search, "RENDER", {"spp": 1, "oversampling": 1, "crop": "target", "near_field_spp": 16}
     )
+    crops = {n: {**c, "task": {}} for n, c in unknowns_search.CONDITIONS.items()}  # crops: whole frames cost more
+    monkeypatch.setattr(unknowns_search, "CONDITIONS", crops)
+    monkeypatch.setattr(unknowns_search, "HELD", ("paper_colour", "housing", "tuning_webcam"))  # renders shared
     summary = unknowns_search.run(tmp_path, samples=2, seeds=1, execution=Execution(workers=1))
     table = pd.read_csv(tmp_path / "samples.csv")
     assert len(table) == 2
@@ -98,4 +101,5 @@ def test_tiny_search_scores_every_point_on_every_condition_and_side(tmp_path, mo
     t6 = summary["conditions"]["t6-1m"]["unknowns"]
     assert "led_drive_v2_red" in t6 and "led_drive_v1_red" not in t6 and "tuning_webcam" not in t6
     assert t6["led_drive_v2_red"]["prior"] == pytest.approx([0.05, 20.0])
+    assert t6["housing"] == {"held_at": "black"}
     assert load_unknowns()["led_drive"].low == 0.05
