@@ -245,7 +245,13 @@ def calibrated_set(samples_csv: Path, limit: int | None = None) -> tuple[list[di
     order. Raises ``ValueError`` (naming the file) for a file that is not a search's output or
     whose points agree with no observation at all.
     """
-    table = pd.read_csv(samples_csv)
+    try:
+        table = pd.read_csv(samples_csv)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        reason = str(e).strip().splitlines()[0]
+        raise ValueError(
+            f"{samples_csv}: expected an unknowns-search samples.csv, cannot read it as CSV ({reason})"
+        ) from None
     observations = [f"{c}_{s}" for c in CONDITIONS for s in SIDE_COLOURS]
     need = ["consistent", f"consistent_{TUNING}", *observations, *search_space()]
     missing = [c for c in need if c not in table]

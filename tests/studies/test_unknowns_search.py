@@ -78,6 +78,9 @@ def test_calibrated_set_refuses_what_it_cannot_use(tmp_path):
     pd.DataFrame({"x": [1]}).to_csv(csv, index=False)
     with pytest.raises(ValueError, match="missing column 'consistent'"):
         unknowns_search.calibrated_set(csv)
+    csv.write_text("a,b\n1\n1,2,3\n")
+    with pytest.raises(ValueError, match=r"samples.csv: expected an unknowns-search samples.csv, cannot read it"):
+        unknowns_search.calibrated_set(csv)
 
 
 def test_tiny_search_scores_every_point_on_every_condition_and_side(tmp_path, monkeypatch, mitsuba_variant):
