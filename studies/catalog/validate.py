@@ -381,10 +381,12 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "the LED drive and the webcam's highlight handling (highlight_mode): cores that clip leave their box",
     )
     beyond = dslr[dslr.range_m > 5]
+    right_beyond = (beyond.detected_fraction * beyond.colour_correct_fraction).max() if len(beyond) else np.nan
     verdict(
         "The planned 10 m was not reached (DSLR detections stop beyond 5 m)",
-        bool(len(beyond)) and beyond.detected_fraction.max() < 0.5,
-        f"DSLR detected fraction at 7-10 m: {beyond.detected_fraction.max():.2f} (at most "
+        bool(len(beyond)) and right_beyond < 0.5,
+        f"DSLR correct-colour detections at 7-10 m: {right_beyond:.2f} "
+        f"(any detection {beyond.detected_fraction.max():.2f}, at most "
         f"{beyond.detected_high.max():.2f} over the set and seeds)"
         if len(beyond)
         else "not tested",
