@@ -193,6 +193,10 @@ def run(
         for label, boxes in (("study", study_boxes), ("derived", derived))
         for v in conclusions(table, frame, label, boxes)
     ]
+    which += (
+        f"; {options.seeds * len(calibrated)} frames per condition ({len(calibrated)} points × {options.seeds} seeds): "
+        "each verdict rests on that many frames per condition, read it with the interval in its evidence"
+    )
     _report(out, table, verdicts, derived, flux, which)
     summary = {"study": NAME, "calibrated_set": which, "conclusions": verdicts, "derived_thresholds": derived}
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
