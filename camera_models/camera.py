@@ -12,6 +12,7 @@ import csv
 import math
 from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
+from pathlib import Path
 
 import colour
 import numpy as np
@@ -19,8 +20,9 @@ from numpy.typing import NDArray
 
 from camera_models.glare import GlareSpread, OpticsEffects
 from scenes import spectra
-from scenes.sourced import load_sourced
-from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry, camera_names
+from scenes.hardware import hardware_file
+from scenes.sourced import DataFileError, Fields, load_sourced
+from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry
 
 BODY_DIR = CAMERA_DATA_DIR / "bodies"
 SSF_DIR = CAMERA_DATA_DIR / "ssf"
@@ -222,14 +224,14 @@ def _finite(x) -> bool:
         return False
 
 
-def load_ssf_qe(csv_name: str, peak_qe: float, energy_response: bool) -> NDArray[np.float64]:
+def load_ssf_qe(csv_path: Path, peak_qe: float, energy_response: bool) -> NDArray[np.float64]:
     """Quantum efficiency per channel on :data:`spectra.WAVELENGTHS_NM`, electrons/photon.
 
     The curves (relative response to spectral radiance, 10 nm steps) are interpolated
     to 1 nm; an energy response s(λ) becomes a photon response s(λ)/λ; the result is
     scaled so the green channel's peak equals ``peak_qe``.
     """
-    with open(SSF_DIR / csv_name, encoding="utf-8") as f:
+    with open(csv_path, encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
     lam = np.array([float(r["wavelength_nm"]) for r in rows])
     rgb = np.array([[float(r[c]) for r in rows] for c in "rgb"])
@@ -263,122 +265,218 @@ def camera_to_xyz_from_ssf(qe_rgb: NDArray[np.float64]) -> NDArray[np.float64]:
     return aces.matrix_RGB_to_XYZ @ np.asarray(idt)
 
 
-@lru_cache(maxsize=16)
 def load_camera(name: str) -> Camera:
-    """The camera called ``name`` (see ``camera_names()``); unknown names raise ValueError."""
-    if name not in camera_names():
-        raise ValueError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    """The camera called ``name`` (see ``camera_names()``); unknown names and bad files raise ValueError."""
+    path = hardware_file("camera", name)
+    return _camera_from_file(name, path, path.stat().st_mtime_ns)
+
+
+CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+HIGHLIGHT_MODES = ("clip", "unclip", "blend")
+"""ISP highlight handling: dcraw ``-H 0``, ``-H 1``, ``-H 2`` (see :mod:`camera_models.isp`)."""
+NOISE_REDUCTION_METHODS = ("none", "nlmeans")
+TONE_CURVES = ("srgb", "picture-standard")
+CHROMA_SUBSAMPLINGS = ("4:4:4", "4:2:2", "4:2:0")
+DISTORTION_TERMS = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "equidistant": ()}
+"""Coefficients of each lens distortion model (lensfun conventions; see :mod:`camera_models.optics`)."""
+
+
+@lru_cache(maxsize=16)
+def _camera_from_file(name: str, path: Path, _mtime_ns: int) -> Camera:
+    """Load and check a camera file: every field is checked with a one-line error naming it."""
     geometry = camera_geometry(name)
-    values, _ = load_sourced(CAMERA_DATA_DIR / f"{name}.toml")
-    body, _ = load_sourced(BODY_DIR / f"{values['body']}.toml")
-    o = values["optics"]
-    dist = o["distortion"]
-    model = dist["model"]
-    terms = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "equidistant": ()}[model]
-    lens = LensModel(
-        f_number=float(o["f_number"]),
-        transmittance=float(o["transmittance"]),
-        blur_sigma_um=float(o["blur_sigma_um"]),
+    values, _ = load_sourced(path)
+    top = Fields(values, f"camera file {path.name}")
+    if top.has("body"):  # a built-in body shared by several lenses
+        bodies = sorted(p.stem for p in BODY_DIR.glob("*.toml"))
+        body_name = top.text("body", choices=tuple(bodies))
+        body = Fields(load_sourced(BODY_DIR / f"{body_name}.toml")[0], f"body file {body_name}.toml")
+    else:  # sensor, image processing and exposure written in the camera file itself
+        body = top
+    lens = _lens(top.table("optics"))
+    sensor = _sensor(body.table("sensor"), path.parent)
+    isp = _isp(body.table("isp"), sensor)
+    exposure = _exposure(body.table("exposure"))
+    return Camera(geometry.name, geometry, lens, sensor, isp, exposure)
+
+
+def _lens(o: Fields) -> LensModel:
+    dist = o.table("distortion")
+    model = dist.text("model", choices=tuple(DISTORTION_TERMS))
+    crop = o.number("crop_factor", positive=True, default=1.0)
+    calibration_crop = dist.number("calibration_crop_factor", positive=True, default=crop)
+    glare = o.table("glare") if o.has("glare") else None
+    crosstalk = o.table("crosstalk", default={})
+    return LensModel(
+        f_number=o.number("f_number", minimum=0.5, maximum=64.0),
+        transmittance=o.number("transmittance", positive=True, maximum=1.0),
+        blur_sigma_um=o.number("blur_sigma_um", minimum=0.0, maximum=1000.0),
         distortion_model=model,
-        distortion_terms=tuple(float(dist[t]) for t in terms),
-        distortion_scale=float(dist.get("calibration_crop_factor", 1.0)) / float(o.get("crop_factor", 1.0))
-        if "calibration_crop_factor" in dist and "crop_factor" in o
-        else 1.0,
-        vignetting=tuple(
-            sorted(
-                (VignettingEntry(**{k: float(v) for k, v in e.items()}) for e in o.get("vignetting", [])),
-                key=lambda e: e.f_number,
-            )
-        ),
-        lensfun_camera=o.get("lensfun_camera"),
-        lensfun_lens=o.get("lensfun_lens"),
+        distortion_terms=tuple(dist.number(t) for t in DISTORTION_TERMS[model]),
+        distortion_scale=calibration_crop / crop,
+        vignetting=_vignetting(o),
+        lensfun_camera=o.text("lensfun_camera", default=None) if o.has("lensfun_camera") else None,
+        lensfun_lens=o.text("lensfun_lens", default=None) if o.has("lensfun_lens") else None,
         glare=GlareSpread(
-            fraction=float(o["glare"]["fraction"]),
-            knee_um=float(o["glare"]["knee_um"]),
-            exponent=float(o["glare"]["exponent"]),
-            outer_radius_mm=float(o["glare"]["outer_radius_mm"]),
+            fraction=glare.number("fraction", minimum=0.0, maximum=1.0),
+            knee_um=glare.number("knee_um", positive=True),
+            exponent=glare.number("exponent", positive=True),
+            outer_radius_mm=glare.number("outer_radius_mm", positive=True),
         )
-        if "glare" in o
+        if glare is not None
         else None,
-        crosstalk_fraction=float(o.get("crosstalk", {}).get("fraction", 0.0)),
-        crosstalk_diagonal_share=float(o.get("crosstalk", {}).get("diagonal_share", 0.0)),
+        crosstalk_fraction=crosstalk.number("fraction", minimum=0.0, maximum=0.5, default=0.0),
+        crosstalk_diagonal_share=crosstalk.number("diagonal_share", minimum=0.0, maximum=1.0, default=0.0),
     )
-    s = body["sensor"]
-    qe = load_ssf_qe(s["ssf_csv"], float(s["peak_qe"]), bool(s["ssf_is_energy_response"]))
-    uses_iso = "base_iso" in s
-    sensor = SensorModel(
-        cfa=s["cfa"],
+
+
+def _vignetting(o: Fields) -> tuple[VignettingEntry, ...]:
+    entries = [Fields(v, o.file, f"{o.prefix}vignetting[{i}].") for i, v in enumerate(_list(o, "vignetting"))]
+    terms = ("f_number", "k1", "k2", "k3")
+    out = (VignettingEntry(**{k: e.number(k, positive=k == "f_number") for k in terms}) for e in entries)
+    return tuple(sorted(out, key=lambda e: e.f_number))
+
+
+def _list(table: Fields, key: str) -> list:
+    value = table.values.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise DataFileError(f"{table.file}: {table.prefix}{key}: expected a list of tables ([[...]]), got {value!r}")
+    return value
+
+
+def _ssf_path(s: Fields, folder: Path) -> Path:
+    """The spectral-sensitivity CSV: a built-in one (``data/ssf``) or a file next to the camera file."""
+    name = s.text("ssf_csv")
+    builtin = {p.name: p for p in SSF_DIR.glob("*.csv")}
+    path = builtin.get(name) or (folder / name)
+    if not path.is_file():
+        raise DataFileError(
+            f"{s.file}: {s.prefix}ssf_csv: expected one of {', '.join(sorted(builtin))} or a CSV next to the "
+            f"camera file, got {name!r}"
+        )
+    return path
+
+
+def _sensor(s: Fields, folder: Path) -> SensorModel:
+    uses_iso = s.has("base_iso")
+    bits = s.number("adc_bits", integer=True, minimum=8, maximum=16)
+    black = s.number("black_level_DN", minimum=0.0)
+    white = s.number("white_level_DN", positive=True, maximum=2**bits - 1)
+    if white <= black:
+        raise DataFileError(f"{s.file}: {s.prefix}white_level_DN: expected a number > black_level_DN, got {white!r}")
+    ssf = _ssf_path(s, folder)
+    try:
+        qe = load_ssf_qe(ssf, s.number("peak_qe", positive=True, maximum=1.0), _flag(s, "ssf_is_energy_response"))
+    except (KeyError, ValueError) as exc:
+        raise DataFileError(
+            f"{s.file}: {s.prefix}ssf_csv: expected a CSV with columns wavelength_nm, r, g, b ({exc})"
+        ) from None
+    if uses_iso:
+        base = s.number("base_iso", positive=True)
+        gains = {
+            "base_iso": base,
+            "min_iso": s.number("min_iso", positive=True),
+            "max_iso": s.number("max_iso", positive=True),
+            "gain_code_min": None,
+            "gain_code_max": None,
+            "analog_gain_at_max_code": None,
+        }
+        high_gain = s.number("read_noise_high_iso", positive=True) / base
+    else:
+        code_min = s.number("gain_code_min", integer=True, minimum=0)
+        gains = {
+            "base_iso": None,
+            "min_iso": None,
+            "max_iso": None,
+            "gain_code_min": code_min,
+            "gain_code_max": s.number("gain_code_max", integer=True, minimum=code_min + 1),
+            "analog_gain_at_max_code": s.number("analog_gain_at_max_code", minimum=1.0),
+        }
+        high_gain = s.number("read_noise_high_gain", minimum=1.0)
+    return SensorModel(
+        cfa=s.text("cfa", choices=CFA_PATTERNS),
         qe_rgb=qe,
-        adc_bits=int(s["adc_bits"]),
-        black_level_DN=float(s["black_level_DN"]),
-        white_level_DN=float(s["white_level_DN"]),
-        gain_K_DN_per_e_at_base=float(s["gain_K_DN_per_e_at_base"]),
-        read_noise_e_at_base=float(s["read_noise_e_at_base"]),
-        read_noise_e_at_high_gain=float(s["read_noise_e_at_high_iso"]),
-        high_gain=float(s["read_noise_high_iso"]) / float(s["base_iso"])
-        if uses_iso
-        else float(s["read_noise_high_gain"]),
-        row_noise_fraction=float(s["row_noise_fraction"]),
-        full_well_e=float(s["full_well_e"]),
-        blooming_fraction=float(s["blooming_fraction"]),
-        dark_current_e_per_s=float(s["dark_current_e_per_s"]),
-        dsnu_dark_current_fraction=float(s["dsnu_dark_current_fraction"]),
-        dsnu_offset_DN=float(s["dsnu_offset_DN"]),
-        prnu_fraction=float(s["prnu_fraction"]),
-        fixed_pattern_seed=int(s["fixed_pattern_seed"]),
-        base_iso=float(s["base_iso"]) if uses_iso else None,
-        min_iso=float(s["min_iso"]) if uses_iso else None,
-        max_iso=float(s["max_iso"]) if uses_iso else None,
-        gain_code_min=None if uses_iso else int(s["gain_code_min"]),
-        gain_code_max=None if uses_iso else int(s["gain_code_max"]),
-        analog_gain_at_max_code=None if uses_iso else float(s["analog_gain_at_max_code"]),
+        adc_bits=bits,
+        black_level_DN=black,
+        white_level_DN=white,
+        gain_K_DN_per_e_at_base=s.number("gain_K_DN_per_e_at_base", positive=True),
+        read_noise_e_at_base=s.number("read_noise_e_at_base", minimum=0.0),
+        read_noise_e_at_high_gain=s.number("read_noise_e_at_high_iso", minimum=0.0),
+        high_gain=high_gain,
+        row_noise_fraction=s.number("row_noise_fraction", minimum=0.0, maximum=1.0),
+        full_well_e=s.number("full_well_e", positive=True),
+        blooming_fraction=s.number("blooming_fraction", minimum=0.0, maximum=1.0),
+        dark_current_e_per_s=s.number("dark_current_e_per_s", minimum=0.0),
+        dsnu_dark_current_fraction=s.number("dsnu_dark_current_fraction", minimum=0.0),
+        dsnu_offset_DN=s.number("dsnu_offset_DN", minimum=0.0),
+        prnu_fraction=s.number("prnu_fraction", minimum=0.0, maximum=1.0),
+        fixed_pattern_seed=s.number("fixed_pattern_seed", integer=True, minimum=0),
+        **gains,
     )
-    i = body["isp"]
-    if "xyz_to_camera" in i:  # DNG-style matrix for raw (unbalanced) camera RGB; make it act on balanced RGB
-        xyz_to_camera = _matrix(i["xyz_to_camera"])
+
+
+def _flag(table: Fields, key: str) -> bool:
+    value = table.values.get(key)
+    if not isinstance(value, bool):
+        raise DataFileError(f"{table.file}: {table.prefix}{key}: expected true or false, got {value!r}")
+    return value
+
+
+def _isp(i: Fields, sensor: SensorModel) -> ISPModel:
+    if i.has("xyz_to_camera"):  # DNG-style matrix for raw (unbalanced) camera RGB; make it act on balanced RGB
+        rows = i.values["xyz_to_camera"]
+        if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
+            raise DataFileError(f"{i.file}: {i.prefix}xyz_to_camera: expected a 3x3 matrix, got {rows!r}")
+        xyz_to_camera = _matrix(rows)
         d65 = np.array([0.95047, 1.0, 1.08883])  # CIE D65 white, Y = 1 (CIE 15:2004)
         neutral = xyz_to_camera @ d65
         camera_to_xyz = np.linalg.inv(xyz_to_camera) @ np.diag(neutral / neutral[1])
     else:
-        camera_to_xyz = camera_to_xyz_from_ssf(qe)
-    processing = i.get("processing", "legacy")
-    profiles = i.get("processing_options", {})
-    if processing not in profiles and processing != "legacy":
-        raise ValueError(f"isp.processing: expected one of {', '.join(profiles) or 'legacy'}, got {processing!r}")
-    pp = profiles.get(processing, {})
+        camera_to_xyz = camera_to_xyz_from_ssf(sensor.qe_rgb)
+    profiles = i.table("processing_options", default={})
+    processing = i.text("processing", choices=tuple(profiles.values) or ("legacy",), default="legacy")
+    pp = profiles.table(processing, default={})
     # the noise-reduction strengths belong to the body: kept whichever option is chosen, so a run
     # can switch noise reduction on by itself (camera override "isp.noise_reduction")
-    nr = next((p for p in (pp, *profiles.values()) if "nr_analog_gain" in p), {})
-    isp = ISPModel(
-        demosaic=i["demosaic"],
-        white_balance=i["white_balance"],
-        awb_max_gain_ratio=float(i.get("awb_max_gain_ratio", 1.0)),
+    nr = next(
+        (t for t in (pp, *(profiles.table(k) for k in profiles.values)) if t.has("nr_analog_gain")),
+        Fields({}, i.file),
+    )
+    nr_keys = ("nr_analog_gain", "nr_luma_h", "nr_chroma_h")
+    nr_values = {k: nr.numbers(k, minimum=0.0) if nr.has(k) else () for k in nr_keys}
+    if len({len(v) for v in nr_values.values()}) > 1:
+        raise DataFileError(f"{nr.file}: {nr.prefix}nr_luma_h: expected as many strengths as nr_analog_gain")
+    return ISPModel(
+        demosaic=i.text("demosaic", choices=("bilinear",)),
+        white_balance=i.text("white_balance", choices=("daylight", "auto")),
+        awb_max_gain_ratio=i.number("awb_max_gain_ratio", minimum=1.0, default=1.0),
         camera_to_xyz=camera_to_xyz,
-        tone_curve=pp.get("tone_curve", i.get("tone_curve", "srgb")),
-        jpeg_quality=int(i["jpeg_quality"]),
-        chroma_subsampling=i["chroma_subsampling"],
+        tone_curve=pp.text("tone_curve", choices=TONE_CURVES, default=i.text("tone_curve", TONE_CURVES, "srgb")),
+        jpeg_quality=i.number("jpeg_quality", integer=True, minimum=1, maximum=100),
+        chroma_subsampling=i.text("chroma_subsampling", choices=CHROMA_SUBSAMPLINGS),
         processing=processing,
-        highlight=pp.get("highlight", "clip"),
-        noise_reduction=pp.get("noise_reduction", "none"),
-        nr_analog_gain=tuple(float(v) for v in nr.get("nr_analog_gain", ())),
-        nr_luma_h=tuple(float(v) for v in nr.get("nr_luma_h", ())),
-        nr_chroma_h=tuple(float(v) for v in nr.get("nr_chroma_h", ())),
-        tone_contrast=float(pp.get("tone_contrast", 0.0)),
-        sharpening_amount=float(pp.get("sharpening_amount", 0.0)),
-        sharpening_sigma_px=float(pp.get("sharpening_sigma_px", 1.0)),
+        highlight=pp.text("highlight", choices=HIGHLIGHT_MODES, default="clip"),
+        noise_reduction=pp.text("noise_reduction", choices=NOISE_REDUCTION_METHODS, default="none"),
+        **nr_values,
+        tone_contrast=pp.number("tone_contrast", minimum=0.0, maximum=1.0, default=0.0),
+        sharpening_amount=pp.number("sharpening_amount", minimum=0.0, maximum=5.0, default=0.0),
+        sharpening_sigma_px=pp.number("sharpening_sigma_px", positive=True, default=1.0),
     )
-    e = body["exposure"]
-    exposure = ExposureModel(
-        mode=e["mode"],
-        exposure_s=float(e["exposure_s"]) if "exposure_s" in e else None,
-        iso=float(e["iso"]) if "iso" in e else None,
-        min_exposure_s=float(e["min_exposure_s"]),
-        max_exposure_s=float(e["max_exposure_s"]),
-        target_mean=float(e["target_mean"]) if "target_mean" in e else None,
-        ae_frames=int(e["ae_frames"]) if "ae_frames" in e else None,
-        ae_damping=float(e["ae_damping"]) if "ae_damping" in e else None,
+
+
+def _exposure(e: Fields) -> ExposureModel:
+    mode = e.text("mode", choices=("manual", "auto"))
+    manual = mode == "manual"
+    return ExposureModel(
+        mode=mode,
+        exposure_s=e.number("exposure_s", positive=True) if manual or e.has("exposure_s") else None,
+        iso=e.number("iso", positive=True) if e.has("iso") else None,
+        min_exposure_s=e.number("min_exposure_s", positive=True),
+        max_exposure_s=e.number("max_exposure_s", positive=True),
+        target_mean=e.number("target_mean", positive=True, maximum=1.0) if not manual or e.has("target_mean") else None,
+        ae_frames=e.number("ae_frames", integer=True, minimum=1) if not manual or e.has("ae_frames") else None,
+        ae_damping=e.number("ae_damping", positive=True, maximum=1.0) if e.has("ae_damping") else None,
     )
-    return Camera(name, geometry, lens, sensor, isp, exposure)
 
 
 def with_overrides(camera: Camera, overrides: dict[str, object]) -> Camera:
@@ -412,3 +510,35 @@ def _replace_path(obj, keys: list[str], value: object, path: str):
     elif isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     return replace(obj, **{name: value})
+
+
+def camera_template(like: str = "canon-t6-18mm") -> str:
+    """A complete camera file to copy and edit: the camera ``like`` with its body written in.
+
+    The result has the form of every camera file (``name``, ``description``, ``[geometry]``,
+    ``[optics]``) with ``[sensor]``, ``[isp]`` and ``[exposure]`` in the file itself instead
+    of a ``body = ...`` reference, named ``my-camera``; it loads as a camera identical to
+    ``like`` apart from its name.
+    """
+    path = hardware_file("camera", like)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    body_name = load_sourced(path)[0].get("body")
+    header = [
+        f"# A camera file for beacon-sim, made from '{like}' (beacon-sim cameras --template --like {like}).",
+        "# Edit every value for your camera and lens; give each number a `source` (data sheet, measurement)",
+        "# or an `assumed` note saying why the value is reasonable. Use it with --camera-file FILE.",
+        "# Units are in the field names; [geometry] may give focal_length_mm or diagonal_fov_deg.",
+    ]
+    out = [*header]
+    for line in lines:
+        if line.startswith("name ="):
+            out.append('name = "my-camera"')
+        elif line.startswith("description ="):
+            out.append(f'description = "my camera (from the template of {like})"')
+        elif not line.startswith("body ="):
+            out.append(line)
+    if body_name is not None:
+        body_lines = (BODY_DIR / f"{body_name}.toml").read_text(encoding="utf-8").splitlines()
+        out += ["", f"# sensor, image processing and exposure (from the body '{body_name}')"]
+        out += [line for line in body_lines if not line.startswith("name =")]
+    return "\n".join(out) + "\n"

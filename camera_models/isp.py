@@ -51,7 +51,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.camera import Camera
+from camera_models.camera import HIGHLIGHT_MODES, NOISE_REDUCTION_METHODS, TONE_CURVES, Camera
 from camera_models.sensor import cfa_channels
 from scenes import spectra
 
@@ -123,9 +123,6 @@ class ProcessedImage:
     wb_gains: NDArray[np.float64]
 
 
-HIGHLIGHT_MODES = ("clip", "unclip", "blend")
-NOISE_REDUCTION_METHODS = ("none", "nlmeans")
-TONE_CURVES = ("srgb", "picture-standard")
 NLMEANS_TEMPLATE_PX = 7
 """Non-local means patch size, px (OpenCV documentation: "templateWindowSize ... recommended value 7")."""
 NLMEANS_SEARCH_PX = 21

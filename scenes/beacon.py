@@ -20,14 +20,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from scenes.hardware import hardware_file, hardware_names
 from scenes.led import SIDE_COLOURS
-from scenes.sourced import DATA_DIR, load_sourced
+from scenes.sourced import DataFileError, Fields, load_sourced
 
-BEACON_NAMES = ("v1", "v2")
 HOUSING_FINISHES = ("white", "black")
 
 SIDE_ANGLE_RAD = {"blue": 0.0, "green": math.pi / 2, "red": math.pi, "yellow": 3 * math.pi / 2}
@@ -77,7 +78,7 @@ class BeaconDesign:
     def __post_init__(self) -> None:
         for finish, t in self.housing_transmittance.items():
             if not 0.0 <= t <= 1.0 - self.housing_reflectance[finish]:
-                raise ValueError(f"beacons.toml housing_transmittance.{finish}: expected 0 <= T <= 1 - R")
+                raise ValueError(f"beacon {self.name}: housing_transmittance.{finish}: expected 0 <= T <= 1 - R")
 
     @property
     def housing_radius_m(self) -> float:
@@ -128,42 +129,72 @@ def _markers(arm_m: float, out_m: float, in_plane_face: str) -> tuple[Marker, ..
     return tuple(out)
 
 
-@lru_cache(maxsize=1)
+def beacon_names() -> list[str]:
+    """Names of every beacon: the package's own files, then the user's (:mod:`scenes.hardware`)."""
+    return hardware_names("beacon")
+
+
 def load_beacons() -> dict[str, BeaconDesign]:
-    """V1 and V2 from ``scenes/data/beacons.toml``."""
-    values, _ = load_sourced(DATA_DIR / "beacons.toml")
-    c = values["common"]
-    mm = 1e-3
-    designs = {}
-    for name in BEACON_NAMES:
-        v = values[name]
-        face = v["in_plane_leds_face"]
-        if face not in ("viewer", "outward"):
-            raise ValueError(f"beacons.toml {name}.in_plane_leds_face: expected viewer|outward")
-        designs[name] = BeaconDesign(
-            name=name,
-            description=v["description"],
-            markers=_markers(v["arm_length_mm"] * mm, v["out_of_plane_mm"] * mm, face),
-            arm_length_m=v["arm_length_mm"] * mm,
-            out_of_plane_m=v["out_of_plane_mm"] * mm,
-            d_t_m=c["d_t_mm"] * mm,
-            lit_face_diameter_m=c["lit_face_diameter_mm"] * mm,
-            housing_wall_m=c["housing_wall_mm"] * mm,
-            housing_depth_m=c["housing_depth_mm"] * mm,
-            arm_width_m=c["arm_width_mm"] * mm,
-            node_radius_m=c["node_radius_mm"] * mm,
-            node_height_m=c["node_height_mm"] * mm,
-            target_height_m=c["target_height_mm"] * mm,
-            lit_face_reflectance=c["lit_face_reflectance"],
-            housing_reflectance=dict(values["housing_reflectance"]),
-            housing_transmittance=dict(values["housing_transmittance"]),
-        )
-    return designs
+    """Every beacon design by name (V1, V2 and the user's files)."""
+    return {name: beacon_design(name) for name in beacon_names()}
 
 
 def beacon_design(name: str) -> BeaconDesign:
-    """The design called ``name`` (``v1`` or ``v2``)."""
-    designs = load_beacons()
-    if name not in designs:
-        raise ValueError(f"beacon: expected one of {', '.join(BEACON_NAMES)}, got {name!r}")
-    return designs[name]
+    """The design called ``name`` (``v1``, ``v2`` or a user's file); one-line errors."""
+    path = hardware_file("beacon", name)
+    return _design_from_file(path, path.stat().st_mtime_ns)
+
+
+@lru_cache(maxsize=16)
+def _design_from_file(path: Path, _mtime_ns: int) -> BeaconDesign:
+    """Load and check a beacon file (``scenes/data/beacons/v2.toml`` shows the form)."""
+    values, _ = load_sourced(path)
+    f = Fields(values, f"beacon file {path.name}")
+    mm = 1e-3
+    arm = f.number("arm_length_mm", positive=True, maximum=2000.0) * mm
+    out = f.number("out_of_plane_mm", minimum=0.0, maximum=2000.0) * mm
+    face = f.text("in_plane_leds_face", choices=("viewer", "outward"))
+    reflectance = f.table("housing_reflectance")
+    transmittance = f.table("housing_transmittance")
+    r = {k: reflectance.number(k, minimum=0.0, maximum=1.0) for k in HOUSING_FINISHES}
+    t = {k: transmittance.number(k, minimum=0.0, maximum=1.0 - r[k]) for k in HOUSING_FINISHES}
+    lit_face = f.number("lit_face_diameter_mm", positive=True, maximum=200.0) * mm
+    if 0.5 * lit_face >= arm:
+        raise DataFileError(f"{f.file}: arm_length_mm: expected more than the lit-face radius, got {arm / mm:g}")
+    return BeaconDesign(
+        name=f.text("name"),
+        description=f.text("description", default=""),
+        markers=_markers(arm, out, face),
+        arm_length_m=arm,
+        out_of_plane_m=out,
+        d_t_m=f.number("d_t_mm", positive=True, maximum=5000.0) * mm,
+        lit_face_diameter_m=lit_face,
+        housing_wall_m=f.number("housing_wall_mm", positive=True, maximum=50.0) * mm,
+        housing_depth_m=f.number("housing_depth_mm", positive=True, maximum=500.0) * mm,
+        arm_width_m=f.number("arm_width_mm", positive=True, maximum=200.0) * mm,
+        node_radius_m=f.number("node_radius_mm", positive=True, maximum=5000.0) * mm,
+        node_height_m=f.number("node_height_mm", positive=True, maximum=10_000.0) * mm,
+        target_height_m=f.number("target_height_mm", positive=True, maximum=10_000.0) * mm,
+        lit_face_reflectance=f.number("lit_face_reflectance", minimum=0.0, maximum=1.0),
+        housing_reflectance=r,
+        housing_transmittance=t,
+    )
+
+
+def beacon_template(like: str = "v2") -> str:
+    """A complete beacon file to copy and edit: the beacon ``like``'s file, named ``my-beacon``."""
+    lines = hardware_file("beacon", like).read_text(encoding="utf-8").splitlines()
+    out = [
+        f"# A beacon file for beacon-sim, made from '{like}' (beacon-sim beacons --template --like {like}).",
+        "# Edit every value for your beacon; give each number a `source` or an `assumed` note.",
+        "# Use it with --beacon-file FILE. The LEDs, diffusers and colours of the four sides are",
+        "# set per run (--led-current-ma, --foam, --paper-sheets, --paper-colour).",
+    ]
+    for line in lines:
+        if line.startswith("name ="):
+            out.append('name = "my-beacon"')
+        elif line.startswith("description ="):
+            out.append(f'description = "my beacon (from the template of {like})"')
+        else:
+            out.append(line)
+    return "\n".join(out) + "\n"

@@ -45,8 +45,120 @@ def load_sourced(path: str | Path) -> tuple[dict[str, Any], dict[str, str]]:
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise DataFileError(f"{path}: cannot read data file ({exc})") from exc
     provenance: dict[str, str] = {}
-    values = _strip(raw, "", provenance)
+    try:
+        values = _strip(raw, "", provenance)
+    except DataFileError as exc:
+        raise DataFileError(f"{path}: {exc}") from None
     return values, provenance
 
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
+
+
+_MISSING = object()
+
+
+class Fields:
+    """Checked access to the values of one table of a data file.
+
+    Every accessor names the file and the dotted field in its error, in one line
+    (``camera file rpi.toml: geometry.pixel_pitch_um: expected a number > 0, got -1``),
+    so a hand-written hardware file is checked field by field before any work.
+
+    Parameters
+    ----------
+    values
+        The table's plain values (as :func:`load_sourced` returns them).
+    file
+        How errors name the file.
+    prefix
+        Dotted path of this table inside the file ("" for the top level).
+    """
+
+    def __init__(self, values: dict[str, Any], file: str, prefix: str = "") -> None:
+        self.values, self.file, self.prefix = values, file, prefix
+
+    def _fail(self, key: str, expected: str, got: object) -> DataFileError:
+        return DataFileError(f"{self.file}: {self.prefix}{key}: expected {expected}, got {got!r}")
+
+    def has(self, key: str) -> bool:
+        """Whether the table has ``key``."""
+        return key in self.values
+
+    def _get(self, key: str, default: object, expected: str) -> Any:
+        if key in self.values:
+            return self.values[key]
+        if default is _MISSING:
+            raise self._fail(key, expected, "nothing (missing)")
+        return default
+
+    def table(self, key: str, default: object = _MISSING) -> Fields:
+        """The sub-table ``key``."""
+        value = self._get(key, default, "a table")
+        if not isinstance(value, dict):
+            raise self._fail(key, "a table", value)
+        return Fields(value, self.file, f"{self.prefix}{key}.")
+
+    def text(self, key: str, choices: tuple[str, ...] | None = None, default: object = _MISSING) -> str:
+        """The string ``key``, one of ``choices`` when given."""
+        expected = f"one of {', '.join(choices)}" if choices else "a string"
+        value = self._get(key, default, expected)
+        if not isinstance(value, str) or (choices and value not in choices):
+            raise self._fail(key, expected, value)
+        return value
+
+    def number(
+        self,
+        key: str,
+        *,
+        minimum: float | None = None,
+        maximum: float | None = None,
+        positive: bool = False,
+        integer: bool = False,
+        default: object = _MISSING,
+    ) -> float:
+        """The finite number ``key`` (a float, or an int when ``integer``) within the bounds."""
+        expected = _number_words(minimum, maximum, positive, integer)
+        value = self._get(key, default, expected)
+        if not _in_bounds(value, minimum, maximum, positive, integer):
+            raise self._fail(key, expected, value)
+        return int(value) if integer else float(value)
+
+    def numbers(
+        self, key: str, *, length: int | None = None, minimum: float | None = None, positive: bool = False
+    ) -> tuple[float, ...]:
+        """The list of finite numbers ``key`` (of ``length`` items when given)."""
+        words = _number_words(minimum, None, positive, False).replace("a number", "numbers")
+        expected = f"a list of {length or 'one or more'} {words}"
+        value = self._get(key, _MISSING, expected)
+        if (
+            not isinstance(value, list)
+            or not value
+            or (length is not None and len(value) != length)
+            or not all(_in_bounds(v, minimum, None, positive, False) for v in value)
+        ):
+            raise self._fail(key, expected, value)
+        return tuple(float(v) for v in value)
+
+
+def _number_words(minimum, maximum, positive, integer) -> str:
+    words = "an integer" if integer else "a number"
+    if positive:
+        words += " > 0"
+    if minimum is not None:
+        words += f" >= {minimum:g}"
+    if maximum is not None:
+        words += f" <= {maximum:g}"
+    return words
+
+
+def _in_bounds(value, minimum, maximum, positive, integer) -> bool:
+    if isinstance(value, bool) or not isinstance(value, int | float) or value != value or abs(value) == float("inf"):
+        return False
+    if integer and float(value) != int(value):
+        return False
+    return not (
+        (positive and value <= 0)
+        or (minimum is not None and value < minimum)
+        or (maximum is not None and value > maximum)
+    )

@@ -1,9 +1,9 @@
 """The viewing camera as the scene needs it: the pixel grid of a camera + lens, its pose
 and pinhole projection.
 
-The camera files live with the camera models (``camera_models/data/<name>.toml``); the
-scene reads only their ``[geometry]`` table here, so a scenario can name its camera
-without the scene importing the camera models (the later stage).
+The camera files live with the camera models (``camera_models/data/<name>.toml``, or a
+user's file, see :mod:`scenes.hardware`); the scene reads only their ``[geometry]`` table
+here, so a scenario can name its camera without the scene importing the camera models (the later stage).
 
 Pixel coordinates follow OpenCV: (u, v) from the top-left, the centre of the top-left
 pixel at (0, 0), u to the right, v down. The principal point is the image centre,
@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from scenes.sourced import load_sourced
+from scenes.hardware import PACKAGE_DIRS, hardware_file, hardware_names
+from scenes.sourced import Fields, load_sourced
 
-CAMERA_DATA_DIR = Path(__file__).resolve().parent.parent / "camera_models" / "data"
+CAMERA_DATA_DIR = PACKAGE_DIRS["camera"]
 """The camera files: one TOML per camera + lens (the camera models read the rest of each)."""
 
 
@@ -133,22 +134,28 @@ def project(geometry: CameraGeometry, pose: CameraPose, points_m) -> NDArray[np.
 
 
 def camera_names() -> list[str]:
-    """Names of all cameras with a data file."""
-    return sorted(p.stem for p in CAMERA_DATA_DIR.glob("*.toml"))
+    """Names of every camera: the package's own files, then the user's (:mod:`scenes.hardware`)."""
+    return hardware_names("camera")
 
 
-@lru_cache(maxsize=16)
 def camera_geometry(name: str) -> CameraGeometry:
-    """Geometry of the camera called ``name`` (e.g. ``canon-t6-18mm``)."""
-    path = CAMERA_DATA_DIR / f"{name}.toml"
-    if not path.is_file():
-        raise ValueError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    """Geometry of the camera called ``name`` (e.g. ``canon-t6-18mm``); one-line errors."""
+    path = hardware_file("camera", name)
+    return _geometry_from_file(path, path.stat().st_mtime_ns)
+
+
+@lru_cache(maxsize=32)
+def _geometry_from_file(path: Path, _mtime_ns: int) -> CameraGeometry:
     values, _ = load_sourced(path)
-    g = values["geometry"]
-    width, height, pitch = int(g["width_px"]), int(g["height_px"]), float(g["pixel_pitch_um"])
-    if "focal_length_mm" in g:
-        focal = float(g["focal_length_mm"])
+    top = Fields(values, f"camera file {path.name}")
+    g = top.table("geometry")
+    width = g.number("width_px", integer=True, minimum=16, maximum=100_000)
+    height = g.number("height_px", integer=True, minimum=16, maximum=100_000)
+    pitch = g.number("pixel_pitch_um", positive=True, maximum=100.0)
+    if g.has("focal_length_mm"):
+        focal = g.number("focal_length_mm", positive=True, maximum=10_000.0)
     else:  # from the diagonal field of view of a rectilinear lens
         half_diag_mm = 0.5 * math.hypot(width, height) * pitch * 1e-3
-        focal = half_diag_mm / math.tan(math.radians(g["diagonal_fov_deg"]) / 2)
-    return CameraGeometry(values["name"], values["description"], width, height, pitch, focal)
+        fov = g.number("diagonal_fov_deg", positive=True, maximum=179.0)
+        focal = half_diag_mm / math.tan(math.radians(fov) / 2)
+    return CameraGeometry(top.text("name"), top.text("description", default=""), width, height, pitch, focal)

@@ -1,18 +1,105 @@
-"""Commands that list the hardware: ``beacons`` and ``cameras`` (a table, or ``--json``)."""
+"""The hardware: ``beacons`` and ``cameras`` (a table, ``--json``, or ``--template`` for a file
+of your own), and the user's hardware files (``--camera-file`` / ``--beacon-file``).
+
+A hardware file option may stand anywhere on the command line and applies to every command:
+:func:`use_hardware_files` takes it out of the arguments, checks the file field by field
+(one-line errors naming the file and field) and registers its name
+(:mod:`scenes.hardware`). When the command takes a camera (``--camera`` / ``--cameras``) or a
+beacon (``--beacon`` / ``--beacons``) and the command line does not name one, the file's
+hardware is used.
+"""
 
 from __future__ import annotations
 
 import json
+from typing import Annotated
 
-from camera_models.camera import load_camera
-from scenes.beacon import load_beacons
+import click
+import typer
+
+from camera_models.camera import camera_template, load_camera
+from scenes.beacon import beacon_design, beacon_template, load_beacons
+from scenes.hardware import add_hardware_file, is_builtin
 from scenes.view import camera_names
 from studies.cli import options as opt
-from studies.cli.common import print_table
+from studies.cli.common import UsageError, print_table
+
+HARDWARE_FILE_OPTIONS = {"--camera-file": "camera", "--beacon-file": "beacon"}
+"""The hardware-file options and the kind of hardware each adds."""
+
+SELECTING_OPTIONS = {"camera": ("--camera", "--cameras"), "beacon": ("--beacon", "--beacons")}
+"""The options by which a command names its camera or beacon (a single name, or a comma list)."""
+
+Template = Annotated[bool, typer.Option("--template", help="Print a complete file to copy and edit, then exit.")]
 
 
-def beacons(json_out: opt.Json = False) -> None:
-    """List the beacon designs and their marker geometry."""
+def use_hardware_files(args: list[str], command: click.Command | None) -> list[str]:
+    """Register the hardware files named in ``args`` and return the remaining arguments.
+
+    Parameters
+    ----------
+    args
+        Command-line arguments after the program name.
+    command
+        The click command ``args`` will run (its options decide where a file's hardware is
+        filled in), or None when there is none (help, version).
+
+    Returns
+    -------
+    list of str
+        ``args`` without the hardware-file options, with ``--camera NAME`` (or
+        ``--cameras NAME,...``) and ``--beacon NAME`` (``--beacons``) added where the command
+        takes them and the command line names none.
+    """
+    rest: list[str] = []
+    added: dict[str, list[str]] = {"camera": [], "beacon": []}
+    i = 0
+    while i < len(args):
+        option, eq, value = args[i].partition("=")
+        if option not in HARDWARE_FILE_OPTIONS:
+            rest.append(args[i])
+            i += 1
+            continue
+        if not eq:
+            if i + 1 >= len(args):
+                raise UsageError(f"{option[2:]}: expected a path to a TOML file after {option}")
+            value, i = args[i + 1], i + 1
+        i += 1
+        kind = HARDWARE_FILE_OPTIONS[option]
+        added[kind].append(_register(kind, value))
+    if command is not None:
+        given = {a.partition("=")[0] for a in rest}
+        names = {o for p in command.params for o in getattr(p, "opts", ())}
+        for kind, found in added.items():
+            single, several = SELECTING_OPTIONS[kind]
+            if not found or given & {single, several}:
+                continue
+            if several in names:
+                rest += [several, ",".join(found)]
+            elif single in names and len(found) == 1:
+                rest += [single, found[0]]
+    return rest
+
+
+def _register(kind: str, path: str) -> str:
+    """Add one hardware file and load it completely, so every field is checked now."""
+    try:
+        name = add_hardware_file(kind, path)
+        load_camera(name) if kind == "camera" else beacon_design(name)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    return name
+
+
+def beacons(
+    json_out: opt.Json = False,
+    template: Template = False,
+    like: Annotated[str, typer.Option("--like", help="Beacon the template starts from.")] = "v2",
+) -> None:
+    """List the beacon designs and their marker geometry (or print a template beacon file)."""
+    if template:
+        print(beacon_template(_builtin("beacon", like)), end="")
+        return
     rows = []
     for b in load_beacons().values():
         rows.append(
@@ -75,8 +162,21 @@ def camera_rows() -> list[dict]:
     return rows
 
 
-def cameras(json_out: opt.Json = False) -> None:
-    """List the camera models with their key figures (grid, lens, sensor, exposure, JPEG)."""
+def _builtin(kind: str, name: str) -> str:
+    if not is_builtin(kind, name):
+        raise UsageError(f"like: expected a built-in {kind}, got {name!r}")
+    return name
+
+
+def cameras(
+    json_out: opt.Json = False,
+    template: Template = False,
+    like: Annotated[str, typer.Option("--like", help="Camera the template starts from.")] = "canon-t6-18mm",
+) -> None:
+    """List the camera models with their key figures (or print a template camera file)."""
+    if template:
+        print(camera_template(_builtin("camera", like)), end="")
+        return
     rows = camera_rows()
     if json_out:
         print(json.dumps(rows, indent=2))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from scenes.sourced import DATA_DIR, DataFileError, load_sourced
@@ -9,7 +11,11 @@ from scenes.view import CAMERA_DATA_DIR
 
 
 @pytest.mark.parametrize(
-    "path", sorted(DATA_DIR.glob("*.toml")) + sorted(CAMERA_DATA_DIR.glob("*.toml")), ids=lambda p: p.name
+    "path",
+    sorted(DATA_DIR.rglob("*.toml"))
+    + sorted(CAMERA_DATA_DIR.rglob("*.toml"))
+    + sorted((Path(__file__).resolve().parents[2] / "docs" / "examples").glob("*.toml")),
+    ids=lambda p: p.name,
 )
 def test_data_files_load_with_provenance(path):
     values, provenance = load_sourced(path)
