@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from scenes.beacon import BEACON_NAMES
+from scenes.beacon import beacon_names
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import ENVIRONMENT_NAMES
 from scenes.led import SIDE_COLOURS, led_for_side
@@ -48,7 +48,7 @@ class StudyOptions:
         """Fail fast, before any work, with one line naming the bad option."""
 
         _check_choices("cameras", self.cameras, camera_names())
-        _check_choices("beacons", self.beacons, BEACON_NAMES)
+        _check_choices("beacons", self.beacons, beacon_names())
         _check_choices("sides", self.sides, SIDE_COLOURS)
         _check_choices("environments", self.environments, ENVIRONMENT_NAMES)
         for name, values in (
