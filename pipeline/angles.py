@@ -24,6 +24,7 @@ principal point and the focal lengths of an :class:`Intrinsics` and returns true
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +70,86 @@ class Intrinsics:
     def matrix(self) -> NDArray[np.float64]:
         """3×3 camera matrix K."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def resized(self, scale_x: float, scale_y: float | None = None) -> Intrinsics:
+        """The intrinsics of this frame resized by ``scale_x`` (and ``scale_y``, default the same).
+
+        Pixel centres are aligned as in ``cv2.resize``: the focal lengths scale with the
+        image and the principal point maps like a pixel centre, c' = (c + 0.5)·s − 0.5 px.
+        The new frame is round(W·s_x) × round(H·s_y) px.
+        """
+        sy = scale_x if scale_y is None else scale_y
+        return Intrinsics(
+            self.fx * scale_x,
+            self.fy * sy,
+            (self.cx + 0.5) * scale_x - 0.5,
+            (self.cy + 0.5) * sy - 0.5,
+            max(1, round(self.width_px * scale_x)),
+            max(1, round(self.height_px * sy)),
+        )
+
+    def resized_to(self, width_px: int, height_px: int) -> Intrinsics | None:
+        """The intrinsics of a resized copy of this frame that is ``width_px`` × ``height_px``, or None.
+
+        None when that size is not the frame resized by one factor (the aspect ratios
+        differ by more than a pixel of rounding): a crop or another sensor mode, whose
+        intrinsics cannot be told from this frame's. The scales are taken per axis
+        (W'/W, H'/H), as a resize to an exact size does.
+        """
+        scales = resize_scales((self.width_px, self.height_px), (width_px, height_px))
+        if scales is None:
+            return None
+        out = self.resized(*scales)
+        return Intrinsics(out.fx, out.fy, out.cx, out.cy, int(width_px), int(height_px))
+
+
+def resize_scales(frame_px: tuple[int, int], image_px: tuple[int, int]) -> tuple[float, float] | None:
+    """Per-axis scales (W'/W, H'/H) when ``image_px`` (W', H') is ``frame_px`` (W, H) resized by one factor, else None.
+
+    One factor s gives round(W·s) × round(H·s); a pixel of slack on each axis allows for
+    programs that floor or ceil instead of rounding.
+    """
+    (w0, h0), (w1, h1) = frame_px, image_px
+    if min(w0, h0, w1, h1) < 1:
+        return None
+    lo = max((w1 - 1) / w0, (h1 - 1) / h0)
+    hi = min((w1 + 1) / w0, (h1 + 1) / h0)
+    return (w1 / w0, h1 / h0) if lo <= hi else None
+
+
+def intrinsics_from_values(
+    width_px: int, height_px: int, fx: float, fy: float | None = None, cx: float | None = None, cy: float | None = None
+) -> Intrinsics:
+    """Pinhole intrinsics of a whole ``width_px`` × ``height_px`` image from given values.
+
+    Parameters
+    ----------
+    width_px, height_px
+        Image size, px.
+    fx
+        Horizontal focal length, px (> 0).
+    fy
+        Vertical focal length, px; None means ``fx`` (square pixels).
+    cx, cy
+        Principal point, px (top-left pixel centre at (0, 0)); None means the image centre
+        ((W − 1)/2, (H − 1)/2). It must lie in the image.
+
+    Raises
+    ------
+    ValueError
+        Naming the field (``fx``, ``fy``, ``cx`` or ``cy``) when a value is not finite,
+        a focal length is not positive, or the principal point is outside the image.
+    """
+    fy = fx if fy is None else fy
+    cx = (width_px - 1) / 2.0 if cx is None else cx
+    cy = (height_px - 1) / 2.0 if cy is None else cy
+    for name, value in (("fx", fx), ("fy", fy)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: expected a focal length > 0 px, got {value!r}")
+    for name, value, size in (("cx", cx, width_px), ("cy", cy, height_px)):
+        if not (math.isfinite(value) and -0.5 <= value <= size - 0.5):
+            raise ValueError(f"{name}: expected a principal point in the image, -0.5 to {size - 0.5} px, got {value!r}")
+    return Intrinsics(float(fx), float(fy), float(cx), float(cy), int(width_px), int(height_px))
 
 
 def study_angles(u, v, processed_size_px: tuple[int, int], intrinsics: Intrinsics) -> tuple[NDArray, NDArray]:
