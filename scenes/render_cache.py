@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import logging
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 ENV_CACHE_DIR = "BEACON_SIM_CACHE"
+
+log = logging.getLogger("beacon_sim")
 
 
 def default_cache_dir() -> Path:
@@ -52,6 +55,7 @@ class CacheStats:
     misses: int = 0
     corrupt: int = 0
     writes: int = 0
+    failed_writes: int = 0
 
 
 @dataclass
@@ -70,7 +74,7 @@ class RenderCache:
         path = self.path(key)
         try:
             blob = path.read_bytes()
-        except FileNotFoundError:
+        except OSError:  # missing, or unreadable: render again
             self.stats.misses += 1
             return None
         digest, payload = blob[:64], blob[64:]
@@ -87,14 +91,21 @@ class RenderCache:
         self.stats.hits += 1
         return arrays
 
-    def store(self, key: str, arrays: dict[str, np.ndarray]) -> Path:
-        """Store ``arrays`` under ``key`` atomically; returns the entry's path."""
+    def store(self, key: str, arrays: dict[str, np.ndarray]) -> Path | None:
+        """Store ``arrays`` under ``key`` atomically; returns the entry's path, or ``None`` when
+        the cache cannot be written (unwritable folder, full disk): the render in hand is still
+        good, so that is a warning, never an error that would throw the finished work away."""
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
         payload = buf.getvalue()
         path = self.path(key)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(path, hashlib.sha256(payload).hexdigest().encode() + payload)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, hashlib.sha256(payload).hexdigest().encode() + payload)
+        except OSError as exc:
+            self.stats.failed_writes += 1
+            log.warning("render cache: cannot write %s (%s); continuing without storing it", path, exc.strerror or exc)
+            return None
         self.stats.writes += 1
         return path
 

@@ -64,14 +64,41 @@ class RenderSettings:
     crop: str = "beacon"
     near_field_spp: int = 1024
 
+    MAX_SPP = 65536
+    """Monte-Carlo noise falls as 1/√spp: at 2^16 samples it is 1/256 of one sample's, far
+    below any sensor's shot noise, while the work (crop × oversampling² × spp) keeps growing."""
+    MAX_OVERSAMPLING = 8
+    """The lens blur (Airy disk ≈ 2.44 λ N ≈ 5 µm at f/3.5) spans about a pixel, so sub-pixels
+    finer than 1/8 pixel resolve nothing more, and memory grows as oversampling²: the T6's full
+    18 MP frame at 8² is 1.1e9 sub-pixels, 4.6 GB per float32 image."""
+    MAX_SEED = (2**32 - 64) // 7919
+    """Mitsuba's sampler seed is a 32-bit unsigned integer and each light group renders with
+    seed × 7919 + group (``scenes.render``), so larger seeds fail inside the render."""
+    LIMIT_REASONS = (
+        ("spp", " (noise falls as 1/√spp; beyond 2^16 only the work grows)"),
+        ("oversampling", " (finer than the lens blur; memory grows as oversampling²)"),
+    )
+    """Why :meth:`validate` bounds a setting, appended to its one-line error."""
+
     def validate(self) -> None:
         """Raise :class:`ScenarioError` for impossible settings."""
-        for name in ("spp", "oversampling", "led_max_depth", "ambient_max_depth", "near_field_spp"):
+        limits = {
+            "spp": self.MAX_SPP,
+            "oversampling": self.MAX_OVERSAMPLING,
+            "led_max_depth": 64,
+            "ambient_max_depth": 64,
+            "near_field_spp": 2**20,
+        }
+        for name, most in limits.items():
             v = getattr(self, name)
-            if not isinstance(v, int) or v < 1:
-                raise ScenarioError(f"{name}: expected an integer >= 1, got {v!r}")
-        if not isinstance(self.seed, int) or not 0 <= self.seed < 2**31:
-            raise ScenarioError(f"seed: expected an integer in [0, 2^31), got {self.seed!r}")
+            if not isinstance(v, int) or isinstance(v, bool) or not 1 <= v <= most:
+                raise ScenarioError(
+                    f"{name}: expected an integer in [1, {most}]{dict(self.LIMIT_REASONS).get(name, '')}, got {v!r}"
+                )
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or not 0 <= self.seed <= self.MAX_SEED:
+            raise ScenarioError(
+                f"seed: expected an integer in [0, {self.MAX_SEED}] (renderer seeds are 32-bit), got {self.seed!r}"
+            )
         if self.crop not in ("beacon", "target"):
             raise ScenarioError(f"crop: expected 'beacon' or 'target', got {self.crop!r}")
         if not isinstance(self.margin_px, int) or self.margin_px < 0:

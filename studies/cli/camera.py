@@ -21,17 +21,19 @@ from scenes.render import render as render_scenario
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import Scenario
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console, prepare_out_dir
+from studies.cli.common import UsageError, check_render_cache, console, prepare_out_dir
 
 
 def _gain(cam, iso: float | None, gain: int | None) -> float:
+    """The analog gain of ``--iso`` (ISO bodies) or ``--gain`` (UVC gain code), refusing the
+    setting the body does not have."""
     s = cam.sensor
     if s.uses_iso:
         if gain is not None:
-            raise UsageError(f"gain: {cam.name} sets its gain as an ISO; use --iso")
+            raise UsageError(f"gain: expected no --gain ({cam.name} sets its gain as an ISO: use --iso), got {gain}")
         return s.analog_gain(iso=cam.exposure.iso if iso is None else iso)
     if iso is not None:
-        raise UsageError(f"iso: {cam.name} has no ISO setting; use --gain (UVC gain code)")
+        raise UsageError(f"iso: expected no --iso ({cam.name} has no ISO setting: use --gain), got {iso:g}")
     return s.analog_gain(gain_code=s.gain_code_min if gain is None else gain)
 
 
@@ -67,9 +69,12 @@ def capture(
     iso: opt.Iso = None,
     gain: opt.Gain = None,
     exposure_s: Annotated[
-        float | None, typer.Option("--exposure-s", help="Exposure time, s (manual; default the camera's).")
+        float | None,
+        typer.Option("--exposure-s", help="Exposure time, s (manual).", show_default="the camera's exposure"),
     ] = None,
-    f_number: Annotated[float | None, typer.Option("--f-number", help="Working f-number (default the lens's).")] = None,
+    f_number: Annotated[
+        float | None, typer.Option("--f-number", help="Working f-number.", show_default="the lens's")
+    ] = None,
     no_cache: opt.NoCache = False,
 ) -> None:
     """Simulate what the camera saves: JPEG, raw mosaic (16-bit PNG), full-frame preview and capture.json."""
@@ -77,11 +82,18 @@ def capture(
     cam = load_camera(camera)
     if f_number is not None:
         check_f_number(f_number)
+    _gain(cam, iso, gain)  # --gain on an ISO body, --iso on a UVC one: refused, never silently ignored
+    given = [name for name, value in (("iso", iso), ("gain", gain), ("exposure_s", exposure_s)) if value is not None]
     exposure = None
-    if iso is not None or gain is not None or exposure_s is not None:
+    if given:
         if cam.exposure.mode == "auto":
-            raise UsageError(f"exposure_s: {camera} exposes automatically; its exposure cannot be set")
+            raise UsageError(
+                f"{given[0]}: expected no manual exposure setting ({camera} exposes automatically), "
+                f"got --{given[0].replace('_', '-')}"
+            )
         exposure = manual_exposure(cam, exposure_s, iso, gain)
+    if not no_cache:
+        check_render_cache()
     prepare_out_dir(out)
     cache = None if no_cache else RenderCache()
     t0 = time.perf_counter()

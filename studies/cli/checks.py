@@ -13,8 +13,9 @@ import typer
 from camera_models.camera import load_camera
 from pipeline.calibration import CV_MODELS
 from scenes.near_field import NearFieldSettings
+from scenes.scenario import Scenario
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console
+from studies.cli.common import UsageError, check_finite, console
 from studies.experiments import estimator_montecarlo, lens_calibration, two_stage_check
 
 
@@ -26,9 +27,17 @@ def two_stage_check_command(
     near_field_spp: Annotated[int, typer.Option("--near-field-spp", help="Samples of the near-field render.")] = 256,
 ) -> None:
     """Render one diffused marker two-stage and brute force; print fluxes, their z-score and the profile χ²."""
-    for name, value in (("brute-spp", brute_spp), ("brute-passes", brute_passes), ("near-field-spp", near_field_spp)):
-        if value < 2:
-            raise UsageError(f"{name}: expected an integer >= 2, got {value}")
+    # a brute-force pass of 2^16 samples per pixel already takes minutes; 4096 passes of it, days
+    limits = (
+        ("brute-spp", brute_spp, 2**16),
+        ("brute-passes", brute_passes, 4096),
+        ("near-field-spp", near_field_spp, 2**20),
+    )
+    for name, value, most in limits:
+        if not 2 <= value <= most:
+            raise UsageError(f"{name}: expected an integer in [2, {most}], got {value}")
+    check_finite("view-deg", view_deg, -89.0, 89.0, " degrees")
+    check_finite("range-m", range_m, 0.05, 100.0, " m (beyond 100 m the marker is far below a pixel)")
     view = two_stage_check.MarkerView(range_m=range_m, view_deg=view_deg)
     with console.status("rendering the marker both ways ..."):
         result = two_stage_check.compare(view, brute_spp, brute_passes, NearFieldSettings(spp=near_field_spp))
@@ -43,8 +52,11 @@ def lens_calibration_command(
     scale: Annotated[int, typer.Option("--scale", help="Reduce the pixel grid by this integer factor (speed).")] = 4,
 ) -> None:
     """Render the study's checkerboard through the lens model in 20 poses, calibrate with OpenCV, compare."""
-    if scale < 1:
-        raise UsageError(f"scale: expected an integer >= 1, got {scale}")
+    if not 1 <= scale <= 16:  # beyond 1/16 the webcams' 1280 px grid is under 80 px, too coarse for the board
+        raise UsageError(f"scale: expected an integer in [1, 16], got {scale}")
+    models = (*CV_MODELS, "fisheye")
+    if model not in models:
+        raise UsageError(f"model: expected one of {', '.join(models)}, got {model!r}")
     load_camera(camera)  # validates the name
     with console.status(f"calibrating {camera} from rendered boards ..."):
         result = lens_calibration.calibrate(lens_calibration.scaled_camera(camera, scale), model)
@@ -61,10 +73,12 @@ def estimator_montecarlo_command(
     seed: opt.Seed = 0,
 ) -> None:
     """RMS range and attitude errors of each pose estimator beside the Cramér–Rao bound."""
-    if trials < 2:
-        raise UsageError(f"trials: expected an integer >= 2, got {trials}")
-    if not sigma_px > 0:
-        raise UsageError(f"sigma-px: expected a noise > 0 px, got {sigma_px}")
+    if not 2 <= trials <= 10**6:
+        raise UsageError(f"trials: expected an integer in [2, 1000000], got {trials}")
+    check_finite("sigma-px", sigma_px, 1e-6, 100.0, " px")
+    if seed < 0:
+        raise UsageError(f"seed: expected an integer >= 0, got {seed}")
+    Scenario(camera=camera, range_m=range_m, yaw_deg=yaw_deg)  # validates camera, range and yaw
     result = estimator_montecarlo.pose_error_trials(camera, range_m, yaw_deg, sigma_px, trials, seed)
     print(json.dumps(result, indent=2))
 

@@ -1,9 +1,16 @@
-"""What every command shares: the console, one-line usage errors, output folders, the
-progress bar handed to long runs, and tables that never truncate names."""
+"""What every command shares: the console, one-line usage errors, output folders (with
+their lock), the render cache check, the execution of sweeps, the progress bar handed to
+long runs, and tables that never truncate names."""
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import logging
+import math
+import os
+import re
+import socket
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -12,16 +19,52 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 
+from scenes.assemble import crop_box
+from scenes.render_cache import ENV_CACHE_DIR, default_cache_dir
+from scenes.scenario import Scenario
+from studies.engine.sweep import Execution
+
+log = logging.getLogger("beacon_sim")
+
 console = Console(stderr=True)
 """Messages, status spinners and progress bars go to stderr; results go to stdout."""
+
+LOCK_NAME = ".beacon-sim.lock"
+"""Lock file inside every output folder: one run at a time per folder (``fcntl.flock``)."""
+
+MAX_SEEDS = 10_000
+"""Most noise seeds per condition a command accepts: every seed is a frame per grid point,
+so 10 000 already multiplies the grid's work ten-thousandfold (beyond it a run never ends)."""
 
 
 class UsageError(ValueError):
     """Bad command-line input (one-line message)."""
 
 
-def prepare_out_dir(out: Path) -> Path:
-    """Create ``out`` and check it is writable, or raise :class:`UsageError`."""
+_LOCKS: dict[Path, int] = {}
+"""Output folders this process holds, resolved path → open lock file descriptor."""
+
+
+def out_path(text: str | Path) -> Path:
+    """Parse an ``--out`` value: a non-empty path (an empty one would silently mean the current
+    folder); a default given as a :class:`Path` passes as it is."""
+    if isinstance(text, Path):
+        return text
+    if not text.strip():
+        raise UsageError(f"expected a folder path, got {text!r} (use --out . for the current folder)")
+    if "\x00" in text:
+        raise UsageError(f"expected a path without NUL characters, got {text!r}")
+    return Path(text)
+
+
+def prepare_out_dir(out: Path, lock: bool = True) -> Path:
+    """Create ``out``, check it is writable and lock it for this run, or raise :class:`UsageError`.
+
+    The lock (``fcntl.flock`` on :data:`LOCK_NAME` inside ``out``, holding this process's pid)
+    is held until :func:`release_out_dirs` or the process ends, so a second run on the same
+    folder refuses instead of repeating the work. A folder this process already holds is not
+    locked again.
+    """
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write-test"
@@ -29,7 +72,143 @@ def prepare_out_dir(out: Path) -> Path:
         probe.unlink()
     except OSError as exc:
         raise UsageError(f"out: cannot write to {out} ({exc.strerror or exc})") from None
+    if lock:
+        _lock(out)
     return out
+
+
+def _lock(out: Path) -> None:
+    key = out.resolve()
+    if key in _LOCKS:
+        return
+    path = out / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as exc:
+        raise UsageError(f"out: cannot create the lock file {path} ({exc.strerror or exc})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+        os.close(fd)
+        raise UsageError(
+            f"out: expected a folder no other run is using, got {out} (in use by beacon-sim pid {other}; "
+            "wait for it to finish or choose another --out)"
+        ) from None
+    except OSError as exc:  # a file system without locks (some network mounts): run unlocked
+        os.close(fd)
+        log.warning("out: cannot lock %s (%s); another run on it would not be stopped", out, exc.strerror or exc)
+        return
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    _LOCKS[key] = fd
+
+
+def release_out_dirs() -> None:
+    """Release the locks of every output folder this process holds (the end of a command)."""
+    while _LOCKS:
+        _, fd = _LOCKS.popitem()
+        with contextlib.suppress(OSError):
+            os.close(fd)  # closing the only descriptor releases the flock
+
+
+def check_render_cache() -> Path:
+    """The render cache folder, created and checked writable before any work, or :class:`UsageError`
+    (a render that cannot be stored would otherwise fail only after it finished)."""
+    root = default_cache_dir()
+    field = ENV_CACHE_DIR if os.environ.get(ENV_CACHE_DIR) else "cache"
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        probe = root / f".write-test-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(
+            f"{field}: expected a writable folder for the render cache, got {root} ({exc.strerror or exc})"
+        ) from None
+    return root
+
+
+MAX_FILM_SUBPIXELS = 2**28
+"""Most rendered sub-pixels (crop × oversampling²) a command accepts: 2^28 float32 values are
+1 GiB per image, and a render holds one image per light group (up to five) besides Dr.Jit's
+buffers. The full 18 MP frame of the T6 fits at oversampling 3."""
+
+MAX_RENDER_SAMPLES = 2**36
+"""Most Monte-Carlo samples (crop × oversampling² × spp) per light group a command accepts:
+about 6.9e10, hours of path tracing at the 10^7-10^8 samples/s of a CPU backend. The defaults
+(spp 16, oversampling 3) use 7e6 at 5 m and 1.5e8 at 1 m on the T6."""
+
+
+def check_render_work(scenario: Scenario) -> Scenario:
+    """Refuse, before any work, a scenario whose camera sees no beacon or whose render could
+    not finish: more than :data:`MAX_FILM_SUBPIXELS` sub-pixels (memory) or
+    :data:`MAX_RENDER_SAMPLES` samples (time)."""
+    crop = crop_box(scenario)  # raises ScenarioError when the camera is inside the beacon or sees none of it
+    s, spp = scenario.render.oversampling, scenario.render.spp
+    film = crop.width * crop.height * s * s
+    what = f"{crop.width}×{crop.height} px crop × {s}²"
+    if film > MAX_FILM_SUBPIXELS:
+        raise UsageError(
+            f"oversampling: expected at most 2^28 rendered sub-pixels (1 GiB per float32 image), "
+            f"got {what} = {film:.3g} at {scenario.range_m:g} m"
+        )
+    if film * spp > MAX_RENDER_SAMPLES:
+        raise UsageError(
+            f"spp: expected at most 2^36 ≈ 6.9e10 samples per render (hours of path tracing), "
+            f"got {what} × spp {spp} = {film * spp:.3g} at {scenario.range_m:g} m"
+        )
+    return scenario
+
+
+def check_workers(workers: int | None) -> int | None:
+    """Validate ``--workers``: 1 to 4 per CPU (each worker process holds its own renderer and
+    render in memory; more only thrash)."""
+    most = 4 * (os.cpu_count() or 1)
+    if workers is not None and not 1 <= workers <= most:
+        raise UsageError(f"workers: expected an integer in [1, {most}] (4 per CPU), got {workers}")
+    return workers
+
+
+def check_scheduler(address: str | None, timeout_s: float = 5.0) -> str | None:
+    """Validate ``--scheduler``: a Dask scheduler address (``tcp://host:port``) that accepts a
+    connection, checked before any work."""
+    if address is None:
+        return None
+    m = re.fullmatch(r"(?:tcp://|tls://)?\[?([A-Za-z0-9_.:-]+?)\]?:(\d{1,5})", address.strip())
+    if m is None or not 0 < int(m.group(2)) < 65536:
+        raise UsageError(f"scheduler: expected a Dask scheduler address tcp://HOST:PORT, got {address!r}")
+    try:
+        with socket.create_connection((m.group(1), int(m.group(2))), timeout=timeout_s):
+            pass
+    except (OSError, UnicodeError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        raise UsageError(f"scheduler: expected a reachable Dask scheduler, got {address!r} ({reason})") from None
+    return address
+
+
+def check_seeds(name: str, seeds: int | None) -> int | None:
+    """Validate a seed count: 1 to :data:`MAX_SEEDS`."""
+    if seeds is not None and not 1 <= seeds <= MAX_SEEDS:
+        raise UsageError(f"{name}: expected an integer >= 1 and <= {MAX_SEEDS}, got {seeds}")
+    return seeds
+
+
+def check_finite(name: str, value: float, low: float, high: float, unit: str = "") -> float:
+    """Validate a number: finite and in ``[low, high]``."""
+    if not (math.isfinite(value) and low <= value <= high):
+        raise UsageError(f"{name}: expected a number in [{low:g}, {high:g}]{unit}, got {value!r}")
+    return value
+
+
+def execution(workers: int | None, scheduler: str | None = None, cache: bool = True) -> Execution:
+    """How a sweep runs (local workers or a Dask scheduler, rich progress), validated before any
+    work; ``cache``: the sweep renders, so the render cache must be writable."""
+    check_workers(workers)
+    check_scheduler(scheduler)
+    if cache:
+        check_render_cache()
+    return Execution(workers=workers, scheduler=scheduler, progress=rich_progress)
 
 
 def parse_list(name: str, text: str | None, convert=str) -> tuple | None:

@@ -4,6 +4,7 @@ marker saturation table, diffuser mosaic) and the speed benchmark."""
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 from typing import Annotated
@@ -16,23 +17,57 @@ from rich.table import Table
 from camera_models.camera import load_camera
 from scenes.mitsuba_variant import active_variant
 from scenes.render_cache import atomic_write_bytes
+from scenes.scenario import RenderSettings, Scenario
 from scenes.view import camera_names
 from studies.catalog import unknowns_search as search
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console, prepare_out_dir, rich_progress
+from studies.cli.common import (
+    UsageError,
+    check_render_cache,
+    check_render_work,
+    check_seeds,
+    check_workers,
+    console,
+    execution,
+    out_path,
+    parse_list,
+    prepare_out_dir,
+    rich_progress,
+)
 from studies.engine import colour_reach as reach
-from studies.engine.sweep import Execution
 from studies.experiments import bench as b
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
 
+MAX_SAMPLES = 2**16
+"""Most points an unknowns search accepts: each is scored on every close-range condition, side
+and seed, about 40 frames, so 2^16 points are millions of frames."""
+
+
+def _cameras(text: str | None, default) -> tuple[str, ...]:
+    """``--cameras`` (comma-separated) validated against the camera files, or ``default``."""
+    names = parse_list("cameras", text)
+    if names is None:
+        return tuple(default)
+    if not names:
+        raise UsageError(f"cameras: expected at least one of {', '.join(camera_names())}, got {text!r}")
+    for name in names:
+        if name not in camera_names():
+            raise UsageError(f"cameras: expected some of {', '.join(camera_names())}, got {name!r}")
+    return names
+
 
 def e2e_detection(
-    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume; tables, summary.md).")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", parser=out_path, metavar="DIR", help="Output directory (re-run to resume; tables, summary.md)."
+        ),
+    ],
     seeds: Annotated[
         int | None,
-        typer.Option("--seeds", help="Sensor-noise seeds per condition, 0..N-1 (default 3; 1 with --quick)."),
+        typer.Option("--seeds", help="Sensor-noise seeds per condition, 0..N-1.", show_default="3; 1 with --quick"),
     ] = None,
     quick: Annotated[
         bool, typer.Option("--quick", help="Ranges 1, 3, 5 m × yaws 0, 15, 30° and one seed (unless --seeds).")
@@ -41,23 +76,24 @@ def e2e_detection(
         bool | None,
         typer.Option(
             "--full-frame-check/--no-full-frame-check",
-            help="Also detect on one full 18 MP frame (2 m, 15°), compare with the crop (default: not with --quick).",
+            help="Also detect on one full 18 MP frame (2 m, 15°), compare with the crop.",
+            show_default="on; off with --quick",
         ),
     ] = None,
     workers: opt.Workers = None,
 ) -> None:
     """Issue 5's end-to-end table: T6 + 18 mm captures of the V2 red side, 1-5 m × 0-30°, both trackers × estimators."""
-    if workers is not None and workers < 1:
-        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    check_seeds("seeds", seeds)
     options = e2e.default_options(quick, seeds)
     options.validate()
+    run_on = execution(workers)
     prepare_out_dir(out)
     console.print(e2e.describe(options))
     t0 = time.perf_counter()
     result = e2e.run(
         out,
         options,
-        Execution(workers=workers, progress=rich_progress),
+        run_on,
         full_frame=full_frame_check if full_frame_check is not None else not quick,
     )
     console.print(f"wrote {', '.join(str(p) for p in result.paths.values())} in {time.perf_counter() - t0:.0f} s")
@@ -65,13 +101,14 @@ def e2e_detection(
 
 def saturation_table(
     out: opt.Out,
-    camera: Annotated[
-        list[str] | None, typer.Option("--camera", help="Camera model (repeat for several; default all four).")
+    cameras: Annotated[
+        str | None,
+        typer.Option(
+            "--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all four"
+        ),
     ] = None,
-    spp: Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")] = 4,
-    oversampling: Annotated[
-        int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")
-    ] = 2,
+    spp: opt.Spp = 4,
+    oversampling: opt.Oversampling = 2,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
 ) -> None:
@@ -82,24 +119,29 @@ def saturation_table(
     webcam auto-exposure values); re-run to resume.
     """
 
-    cameras = tuple(camera) if camera else saturation.CAMERAS
-    for name in cameras:
-        if name not in camera_names():
-            raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
-    if seed < 0:
-        raise UsageError(f"seed: expected an integer >= 0, got {seed}")
-    if workers is not None and workers < 1:
-        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    names = _cameras(cameras, saturation.CAMERAS)
+    RenderSettings(spp=spp, oversampling=oversampling, seed=seed).validate()
+    check_workers(workers)
+    check_render_cache()
+    tasks = saturation.saturation_tasks(names, spp=spp, oversampling=oversampling, seed=seed)
+    seen = set()
+    for task in tasks:  # the largest renders (each camera at its closest range) must be feasible
+        key = json.dumps([task["scenario"]["camera"], task["scenario"]["range_m"], task["render"]], sort_keys=True)
+        if key not in seen:
+            seen.add(key)
+            check_render_work(Scenario(**task["scenario"], render=RenderSettings(**task["render"])))
     prepare_out_dir(out)
-    tasks = saturation.saturation_tasks(cameras, spp=spp, oversampling=oversampling, seed=seed)
     rows = saturation.saturation_rows(out, tasks, workers=workers, progress=rich_progress)
-    saturation.write_csv(rows, out / "saturation_table.csv")
-    (out / "saturation_table.md").write_text(saturation.summary_markdown(rows), encoding="utf-8")
+    partial = out / ".saturation_table.csv.partial"
+    saturation.write_csv(rows, partial)
+    os.replace(partial, out / "saturation_table.csv")  # never a half-written table under the final name
+    atomic_write_bytes(out / "saturation_table.md", saturation.summary_markdown(rows).encode())
     console.print(f"wrote {out}/saturation_table.csv ({len(rows)} rows) and saturation_table.md")
 
 
 def diffuser_mosaic(out: opt.Out) -> None:
     """The diffuser mosaic: one marker at 150 mm behind 0-5 sheets of paper, without and with foam (PNG + JSON)."""
+    check_render_cache()
     prepare_out_dir(out)
     with console.status("rendering the diffuser mosaic ..."):
         fluxes = mosaic.diffuser_mosaic(out / "diffuser_mosaic.png")
@@ -109,9 +151,7 @@ def diffuser_mosaic(out: opt.Out) -> None:
 
 def colour_reach(
     out: opt.Out,
-    camera: Annotated[
-        list[str] | None, typer.Option("--camera", help="Camera model (repeat for several; default all four).")
-    ] = None,
+    cameras: opt.Cameras = None,
 ) -> None:
     """Which of the study's colour boxes each camera's rendering of each LED can enter at any exposure (no render).
 
@@ -120,10 +160,7 @@ def colour_reach(
     (per camera and side: whether any setting reaches the side's own box, and which) and
     trajectories.png.
     """
-    names = list(camera) if camera else camera_names()
-    for name in names:
-        if name not in camera_names():
-            raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {name!r}")
+    names = _cameras(cameras, camera_names())
     prepare_out_dir(out)
     cameras = {n: load_camera(n) for n in names}
     with console.status("colour curves of every camera, LED and setting ..."):
@@ -226,19 +263,23 @@ def bench(
 
 def unknowns_search(
     out: opt.Out,
-    samples: Annotated[int, typer.Option("--samples", help="Points of the unknowns to try (Sobol').")] = 64,
+    samples: Annotated[
+        int, typer.Option("--samples", help=f"Points of the unknowns to try (Sobol'), 1-{MAX_SAMPLES}.")
+    ] = 64,
     seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per point and side.")] = 1,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
 ) -> None:
     """Which unknowns let the study's printed detector see every colour at close range (webcam 150 mm, T6 1 m)."""
-    if samples < 1 or seeds < 1:
-        raise UsageError(f"samples, seeds: expected integers >= 1, got {samples}, {seeds}")
-    if workers is not None and workers < 1:
-        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
+    if not 1 <= samples <= MAX_SAMPLES:
+        raise UsageError(f"samples: expected an integer in [1, {MAX_SAMPLES}], got {samples}")
+    check_seeds("seeds", seeds)
+    if not 0 <= seed < 2**32:
+        raise UsageError(f"seed: expected an integer in [0, 2^32), got {seed}")
+    run_on = execution(workers)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    summary = search.run(out, samples, seeds, seed, Execution(workers=workers, progress=rich_progress))
+    summary = search.run(out, samples, seeds, seed, run_on)
     console.print(
         f"{summary['consistent_points']} of {samples} points consistent ({time.perf_counter() - t0:.0f} s); "
         f"wrote {out}/samples.csv and summary.json"

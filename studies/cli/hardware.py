@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 from typing import Annotated
 
-import click
 import typer
 
 from camera_models.camera import camera_template, load_camera
@@ -33,16 +32,16 @@ SELECTING_OPTIONS = {"camera": ("--camera", "--cameras"), "beacon": ("--beacon",
 Template = Annotated[bool, typer.Option("--template", help="Print a complete file to copy and edit, then exit.")]
 
 
-def use_hardware_files(args: list[str], command: click.Command | None) -> list[str]:
+def use_hardware_files(args: list[str], commands: dict) -> list[str]:
     """Register the hardware files named in ``args`` and return the remaining arguments.
 
     Parameters
     ----------
     args
         Command-line arguments after the program name.
-    command
-        The click command ``args`` will run (its options decide where a file's hardware is
-        filled in), or None when there is none (help, version).
+    commands
+        The app's click commands by name (the options of the command ``args`` runs decide
+        where a file's hardware is filled in).
 
     Returns
     -------
@@ -67,6 +66,7 @@ def use_hardware_files(args: list[str], command: click.Command | None) -> list[s
         i += 1
         kind = HARDWARE_FILE_OPTIONS[option]
         added[kind].append(_register(kind, value))
+    command = next((commands.get(a) for a in rest if not a.startswith("-")), None)
     if command is not None:
         given = {a.partition("=")[0] for a in rest}
         names = {o for p in command.params for o in getattr(p, "opts", ())}

@@ -14,8 +14,9 @@ from typing import Annotated
 import typer
 
 from scenes.scenario import RenderSettings, Scenario
+from studies.cli.common import check_render_work, out_path
 
-Out = Annotated[Path, typer.Option("--out", help="Output directory.")]
+Out = Annotated[Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory.")]
 Json = Annotated[bool, typer.Option("--json", help="Print JSON (for scripts) instead of a table.")]
 Beacon = Annotated[str, typer.Option("--beacon", help="Beacon design: v1 or v2.")]
 Side = Annotated[str, typer.Option("--side", help="Side facing the camera: red, green, blue, yellow.")]
@@ -24,7 +25,8 @@ YawDeg = Annotated[float, typer.Option("--yaw-deg", help="Camera azimuth about t
 Camera = Annotated[str, typer.Option("--camera", help="Camera model (see 'beacon-sim cameras').")]
 Environment = Annotated[str, typer.Option("--environment", help="dark, dark-room or lit-room.")]
 CurrentMA = Annotated[
-    float | None, typer.Option("--led-current-ma", help="LED drive current, mA (default: datasheet test current).")
+    float | None,
+    typer.Option("--led-current-ma", help="LED drive current, mA.", show_default="the LED's datasheet test current"),
 ]
 HeightM = Annotated[float, typer.Option("--camera-height-m", help="Camera height above marker 1, m.")]
 Housing = Annotated[str, typer.Option("--housing", help="Housing finish: black or white.")]
@@ -33,15 +35,26 @@ Sheets = Annotated[int, typer.Option("--paper-sheets", help="Sheets of paper in 
 PaperColour = Annotated[
     str, typer.Option("--paper-colour", help="white, matched (each side's own colour), red, green, blue, yellow.")
 ]
-Spp = Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel.")]
-Oversampling = Annotated[int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis.")]
+Spp = Annotated[int, typer.Option("--spp", help="Samples per rendered sub-pixel, 1-65536.")]
+Oversampling = Annotated[
+    int, typer.Option("--oversampling", help="Rendered sub-pixels per camera pixel, per axis, 1-8.")
+]
 Seed = Annotated[int, typer.Option("--seed", help="Random seed (same seed, same bytes).")]
 NoCache = Annotated[bool, typer.Option("--no-cache", help="Render even if a cached render exists.")]
-Iso = Annotated[float | None, typer.Option("--iso", help="ISO (DSLR).")]
-Gain = Annotated[int | None, typer.Option("--gain", help="UVC gain code (webcam).")]
-Workers = Annotated[int | None, typer.Option("--workers", help="Local worker processes (default: CPUs).")]
-Scheduler = Annotated[str | None, typer.Option("--scheduler", help="Dask scheduler address.")]
-Seeds = Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.")]
+Iso = Annotated[float | None, typer.Option("--iso", help="ISO (DSLR).", show_default="the camera file's ISO")]
+Gain = Annotated[
+    int | None, typer.Option("--gain", help="UVC gain code (webcam).", show_default="the lowest gain code")
+]
+Workers = Annotated[int | None, typer.Option("--workers", help="Local worker processes.", show_default="one per CPU")]
+Scheduler = Annotated[
+    str | None,
+    typer.Option("--scheduler", help="Dask scheduler address (tcp://HOST:PORT).", show_default="local processes"),
+]
+Seeds = Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.", show_default="the study's")]
+Cameras = Annotated[
+    str | None,
+    typer.Option("--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all"),
+]
 
 
 SCENARIO_OPTIONS = (
@@ -82,8 +95,9 @@ def scenario_from(
     oversampling: int,
     seed: int,
 ) -> Scenario:
-    """The :class:`Scenario` the scenario options describe (validated)."""
-    return Scenario(
+    """The :class:`Scenario` the scenario options describe, validated, with a render that can
+    finish (:func:`studies.cli.common.check_render_work`)."""
+    scenario = Scenario(
         beacon=beacon,
         side=side,
         range_m=range_m,
@@ -98,6 +112,8 @@ def scenario_from(
         paper_colour=paper_colour,
         render=RenderSettings(spp=spp, oversampling=oversampling, seed=seed),
     )
+    check_render_work(scenario)
+    return scenario
 
 
 def scenario_command(function: Callable) -> Callable:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -17,7 +19,7 @@ from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import Scenario
 from scenes.view import project
 from studies.cli import options as opt
-from studies.cli.common import console, prepare_out_dir
+from studies.cli.common import check_render_cache, console, prepare_out_dir
 
 
 @opt.scenario_command
@@ -28,6 +30,8 @@ def render(
     no_cache: opt.NoCache = False,
 ) -> None:
     """Render spectral radiance of a beacon on a camera's pixel grid (crop around the beacon)."""
+    if not no_cache:
+        check_render_cache()
     prepare_out_dir(out)
     write_render(out, scenario, None if no_cache else RenderCache(), cube=cube)
 
@@ -39,11 +43,11 @@ def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
         radiance = render_scenario(scenario, cache)
     elapsed = time.perf_counter() - t0
     files = {
-        "radiance": write_radiance_exr(out / "radiance.exr", radiance).name,
-        "preview": write_preview_png(out / "preview.png", radiance).name,
+        "radiance": _atomic(out / "radiance.exr", lambda p: write_radiance_exr(p, radiance)).name,
+        "preview": _atomic(out / "preview.png", lambda p: write_preview_png(p, radiance)).name,
     }
     if cube:
-        files["band_cube"] = write_band_cube_exr(out / "radiance_cube.exr", radiance).name
+        files["band_cube"] = _atomic(out / "radiance_cube.exr", lambda p: write_band_cube_exr(p, radiance)).name
     uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
     meta = {
         "marker_configuration": {
@@ -75,6 +79,15 @@ def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
         f"in {elapsed:.1f} s{' [cache]' if radiance.from_cache else ''}"
     )
     return meta
+
+
+def _atomic(path: Path, write: Callable[[Path], object]) -> Path:
+    """``write`` a file under a hidden partial name, then rename it into place: an interrupted
+    run never leaves a half-written file under the final name."""
+    partial = path.with_name(f".{path.stem}.partial{path.suffix}")
+    write(partial)
+    os.replace(partial, path)
+    return path
 
 
 COMMANDS = {"render": render}

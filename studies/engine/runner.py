@@ -12,6 +12,16 @@ Tasks that share expensive state (frames of one render) can be sent to a worker
 together: ``batch_key`` labels them, and a batch runs its tasks one after another in one
 process, where the render and the lens work are computed once and kept in memory.
 Results are still stored task by task.
+
+Row fields that measure the machine rather than the task (:data:`MACHINE_COLUMNS`, such as
+a worker's peak memory) differ between an interrupted-and-resumed run and an uninterrupted
+one; they are left out of the returned rows and appended to ``<out>/machine.csv`` as each
+task finishes, so result tables depend on the tasks alone.
+
+Interrupting (Ctrl-C, SIGINT) stops a local pool at once: pool workers die on SIGINT (the
+terminal sends it to the whole process group) and the parent terminates any that remain
+instead of waiting for the queued tasks; finished tasks are already stored, so running the
+same sweep again resumes.
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -31,6 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from scenes.hardware import user_hardware_digest
 from scenes.render_cache import atomic_write_bytes, content_key
 
 TaskFunction = Callable[[dict], list[dict]]
@@ -40,6 +52,15 @@ function (process pools and Dask send it by its qualified name)."""
 Progress = Callable[[str, int, int], AbstractContextManager[Callable[[], None]]]
 """A progress display: called with (description, total, already done), it gives a context
 manager whose value is called once per finished task. The command line passes a rich bar."""
+
+
+MACHINE_COLUMNS = ("worker_peak_rss_MiB",)
+"""Row fields that measure the machine a task ran on, not the task: logged to
+:data:`MACHINE_LOG`, never part of the rows :func:`run_tasks` returns."""
+
+MACHINE_LOG = "machine.csv"
+"""Log of :data:`MACHINE_COLUMNS` in a sweep's output folder: one line per finished task's row
+and field (``task``: the key's first 16 hex digits, ``row``: index within the task's rows)."""
 
 
 def no_progress(description: str, total: int, done: int) -> AbstractContextManager[Callable[[], None]]:
@@ -55,6 +76,12 @@ def function_name(function: TaskFunction) -> str:
 def run_one(function: TaskFunction, task: dict) -> list[dict]:
     """Worker entry point (top level, so process pools and Dask can pickle it)."""
     return run_batch(function, [task])[0]
+
+
+def _worker_start() -> None:
+    """Pool worker start-up: die at once on SIGINT, writing nothing (a Mitsuba render
+    cancelled by SIGINT would otherwise return a partial image as if it were complete)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def run_batch(function: TaskFunction, tasks: list[dict]) -> list[list[dict]]:
@@ -102,9 +129,42 @@ def _digest(rows: list[dict]) -> str:
     return hashlib.sha256(json.dumps(rows, sort_keys=True, allow_nan=True).encode()).hexdigest()
 
 
+def without_machine_columns(rows: list[dict]) -> list[dict]:
+    """``rows`` without :data:`MACHINE_COLUMNS`."""
+    return [{k: v for k, v in row.items() if k not in MACHINE_COLUMNS} for row in rows]
+
+
+@dataclass
+class MachineLog:
+    """Appends the :data:`MACHINE_COLUMNS` of finished tasks' rows to a CSV file."""
+
+    path: Path
+
+    def record(self, key: str, rows: list[dict]) -> None:
+        """Log the machine fields of one finished task's rows (nothing when it has none)."""
+        lines = [
+            f"{key[:16]},{i},{name},{row[name]!r}\n"
+            for i, row in enumerate(rows)
+            for name in MACHINE_COLUMNS
+            if name in row
+        ]
+        if not lines:
+            return
+        new = not self.path.exists()
+        with open(self.path, "a", encoding="utf-8") as f:
+            f.write(("task,row,field,value\n" if new else "") + "".join(lines))
+
+
 def task_key(function: TaskFunction, task: dict, version: int) -> str:
-    """Content key of a task."""
-    return content_key("task", function_name(function), version, task)
+    """Content key of a task.
+
+    With user hardware files (:mod:`scenes.hardware`) their contents are part of the key,
+    so a task is never answered from results of an earlier version of the user's file; with
+    none the key is as before.
+    """
+    digest = user_hardware_digest()
+    extra = (digest,) if digest else ()
+    return content_key("task", function_name(function), version, task, *extra)
 
 
 def run_tasks(
@@ -121,7 +181,8 @@ def run_tasks(
     threads_per_worker: int | None = None,
     isolated: bool = False,
 ) -> list[dict]:
-    """Run ``tasks`` (skipping stored ones) and return all rows in task order.
+    """Run ``tasks`` (skipping stored ones) and return all rows in task order, without
+    :data:`MACHINE_COLUMNS` (logged to :data:`MACHINE_LOG` in ``out_dir`` instead).
 
     Parameters
     ----------
@@ -154,6 +215,7 @@ def run_tasks(
     if version is None:
         version = getattr(sys.modules[function.__module__], "FRAME_VERSION", 1)
     store = ResultStore(Path(out_dir) / "tasks")
+    log = MachineLog(Path(out_dir) / MACHINE_LOG)
     keys = [task_key(function, t, version) for t in tasks]
     pending: dict[str, dict] = {}
     for key, task in zip(keys, tasks, strict=True):
@@ -163,18 +225,18 @@ def run_tasks(
     with progress(description, len(set(keys)), len(set(keys)) - len(pending)) as advance:
         if pending:
             if scheduler:
-                _run_dask(scheduler, function, batches, store, advance)
+                _run_dask(scheduler, function, batches, store, advance, log)
             elif not isolated and ((workers or os.cpu_count() or 1) == 1 or len(batches) == 1):
                 for batch in batches:
-                    _store_batch(store, batch, run_batch(function, list(batch.values())), advance)
+                    _store_batch(store, batch, run_batch(function, list(batch.values())), advance, log)
             else:
-                _run_pool(workers or os.cpu_count() or 1, function, batches, store, advance, threads_per_worker)
+                _run_pool(workers or os.cpu_count() or 1, function, batches, store, advance, threads_per_worker, log)
     rows: list[dict] = []
     for key in keys:
         stored = store.get(key)
         if stored is None:
             raise RuntimeError(f"task {key[:12]}: result missing after the run")
-        rows.extend(stored)
+        rows.extend(without_machine_columns(stored))
     return rows
 
 
@@ -192,9 +254,13 @@ def _batches(pending: dict[str, dict], batch_key, max_batch: int) -> list[dict[s
     return out
 
 
-def _store_batch(store: ResultStore, batch: dict[str, dict], results: list[list[dict]], advance) -> None:
+def _store_batch(
+    store: ResultStore, batch: dict[str, dict], results: list[list[dict]], advance, log: MachineLog | None = None
+) -> None:
     for key, rows in zip(batch, results, strict=True):
         store.put(key, rows)
+        if log is not None:
+            log.record(key, rows)
         advance()
 
 
@@ -205,17 +271,40 @@ def _run_pool(
     store: ResultStore,
     advance,
     threads_per_worker: int | None = None,
+    log: MachineLog | None = None,
 ) -> None:
     # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked; each
     # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
     n = min(workers, len(batches))
-    with (
-        worker_threads(n, threads_per_worker),
-        ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool,
-    ):
-        futures = {pool.submit(run_batch, function, list(batch.values())): batch for batch in batches}
-        for future in as_completed(futures):
-            _store_batch(store, futures[future], future.result(), advance)
+    with worker_threads(n, threads_per_worker):
+        pool = ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn"), initializer=_worker_start)
+        try:
+            futures = {pool.submit(run_batch, function, list(batch.values())): batch for batch in batches}
+            for future in as_completed(futures):
+                _store_batch(store, futures[future], future.result(), advance, log)
+        except (KeyboardInterrupt, SystemExit):
+            stop_pool(pool)  # Ctrl-C: stop now; the stored tasks are the resumable state
+            raise
+        except BaseException:
+            pool.shutdown(wait=True)  # a failed task: let the others finish, as before
+            raise
+        pool.shutdown(wait=True)
+
+
+def stop_pool(pool: ProcessPoolExecutor, grace_s: float = 1.0) -> None:
+    """Terminate a process pool's workers without waiting for their tasks (SIGTERM, then
+    SIGKILL for any still alive after ``grace_s``) and drop its queued tasks."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + grace_s
+    for process in processes:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.is_alive():
+            process.kill()
+            process.join(0.5)
 
 
 class worker_threads:
@@ -236,7 +325,12 @@ class worker_threads:
 
 
 def _run_dask(
-    address: str, function: TaskFunction, batches: list[dict[str, dict]], store: ResultStore, advance
+    address: str,
+    function: TaskFunction,
+    batches: list[dict[str, dict]],
+    store: ResultStore,
+    advance,
+    log: MachineLog | None = None,
 ) -> None:
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
@@ -248,8 +342,12 @@ def _run_dask(
             ): batch
             for batch in batches
         }
-        for future in dask_completed(list(futures)):
-            _store_batch(store, futures[future], future.result(), advance)
+        try:
+            for future in dask_completed(list(futures)):
+                _store_batch(store, futures[future], future.result(), advance, log)
+        except (KeyboardInterrupt, SystemExit):
+            client.cancel(list(futures))  # the cluster stops this sweep's tasks; finished ones are stored
+            raise
 
 
 def selftest_task(task: dict) -> list[dict]:

@@ -16,7 +16,7 @@ import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes, content_key
 from studies.engine.frame import FRAME_VERSION, render_batch_key, simulate_frame
-from studies.engine.runner import Progress, no_progress, run_tasks
+from studies.engine.runner import MACHINE_COLUMNS, Progress, no_progress, run_tasks
 from studies.engine.tables import parquet_bytes, write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks
 
@@ -87,7 +87,7 @@ def sweep_in_chunks(
         tasks = frame_tasks(conditions, options, estimators=estimators)
         path = Path(out) / "chunks" / f"{content_key('chunk', FRAME_VERSION, tasks)}.parquet"
         if path.is_file():
-            parts.append(pd.read_parquet(path))
+            parts.append(_read_chunk(path))
             continue
         rows = (frames or run_frames)(tasks, out, execution, description=f"{name} {i + 1}/{len(chunks)}")
         part = pd.DataFrame(rows)
@@ -96,8 +96,14 @@ def sweep_in_chunks(
             part[column] = part[column].astype("category")
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, parquet_bytes(part))
-        parts.append(pd.read_parquet(path))  # as a re-run reads it: cold and warm runs agree
+        parts.append(_read_chunk(path))  # as a re-run reads it: cold and warm runs agree
     frame = pd.concat(parts, ignore_index=True)
     for column in frame.select_dtypes(include="category").columns:  # back to the dtype of its values
         frame[column] = frame[column].astype(frame[column].cat.categories.dtype)
     return write_tables(out, frame)
+
+
+def _read_chunk(path: Path) -> pd.DataFrame:
+    """A stored chunk's table, without machine measurements (chunks stored before they moved to
+    machine.csv still hold them)."""
+    return pd.read_parquet(path).drop(columns=list(MACHINE_COLUMNS), errors="ignore")

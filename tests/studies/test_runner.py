@@ -73,3 +73,25 @@ def test_batched_tasks_give_the_same_table_and_are_stored_one_by_one(tmp_path):
     assert _table(batched) == single
     store = ResultStore(tmp_path / "batched" / "tasks")
     assert all(store.get(task_key(FN, t, 1)) is not None for t in tasks)
+
+
+def test_task_keys_follow_the_users_hardware_files(tmp_path, monkeypatch):
+    """Built-in hardware only: keys as always; a user file, or an edit of it, gives new keys."""
+    from pathlib import Path
+
+    from scenes.hardware import ENV_VAR, add_hardware_file
+    from scenes.render_cache import content_key
+    from studies.engine.runner import function_name
+
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    task = {"seed": 1}
+    plain = task_key(selftest_task, task, 1)
+    assert plain == content_key("task", function_name(selftest_task), 1, task)
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "v2-arms-100mm.toml"
+    mine = tmp_path / "beacon.toml"
+    mine.write_text(example.read_text())
+    add_hardware_file("beacon", mine)
+    with_file = task_key(selftest_task, task, 1)
+    mine.write_text(example.read_text().replace("value = 100.0", "value = 90.0"))
+    edited = task_key(selftest_task, task, 1)
+    assert len({plain, with_file, edited}) == 3
