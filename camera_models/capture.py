@@ -4,6 +4,12 @@ The crop around the beacon comes from :func:`scenes.render.render` at full detai
 the rest of the frame, when a background render (:mod:`scenes.background`) is given,
 from that cheap low-resolution render (camera equation and relative illumination, no
 PSF), so automatic exposure meters the whole frame and the saved image is full size.
+
+A full-frame capture (``full=True``) puts the sensor's noise, the ISP and the JPEG on every
+pixel of the frame, so its saved image has the false blobs sensor noise makes all over a
+dark frame; a crop capture (``full=False``) has them only inside the crop. ``noise=False``
+gives the noiseless frame (:func:`noiseless_raw`): the two then agree pixel for pixel inside
+the crop, away from its edges (a check of the whole-frame path).
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ from camera_models.optics import (
     optical_image,
     relative_illumination,
 )
-from camera_models.sensor import SensorSettings, cfa_channels, expose, mosaic
+from camera_models.sensor import SensorSettings, bloom, cfa_channels, expose, mosaic
 from scenes.radiance import SpectralRadiance
 from scenes.view import project
 
@@ -115,6 +121,35 @@ def frame_meter(
     return meter
 
 
+def noiseless_raw(mean_electrons: NDArray[np.float64], camera: Camera, settings: SensorSettings) -> NDArray[np.uint16]:
+    """Raw frame (DN, uint16) of a sensor without noise: the steps of :func:`camera_models.sensor.expose`
+    with every temporal and fixed-pattern term at zero.
+
+    Each pixel's mean photo-electrons plus the mean dark charge (dark current × exposure
+    time, e⁻), blooming at the full well as in the noisy sensor, × K (DN/e⁻ at the analog
+    gain) + black level, rounded and clipped to [0, white level]. A check of the frame path,
+    not a camera: a real sensor's saved frame always carries noise.
+
+    Parameters
+    ----------
+    mean_electrons
+        (rows, columns) mean photo-electrons of each pixel behind its own colour filter, e⁻.
+    camera
+        The camera (its sensor model).
+    settings
+        Exposure time (s) and analog gain.
+    """
+    settings.validate()
+    s = camera.sensor
+    mu = np.clip(mean_electrons, 0.0, None).astype(np.float32)
+    mu += np.float32(s.dark_current_e_per_s * settings.exposure_s)
+    dn = bloom(mu, s.full_well_e, s.blooming_fraction)
+    dn *= np.float32(s.K_DN_per_e(settings.analog_gain))
+    dn += np.float32(s.black_level_DN)
+    top = min(s.white_level_DN, 2**s.adc_bits - 1)
+    return np.clip(np.rint(dn), 0, top).astype(np.uint16)
+
+
 def capture(
     radiance: SpectralRadiance,
     camera: Camera,
@@ -123,6 +158,8 @@ def capture(
     exposure: ExposureSettings | None = None,
     f_number: float | None = None,
     full: bool = True,
+    *,
+    noise: bool = True,
 ) -> Capture:
     """Simulate the frame the camera records for a render.
 
@@ -142,6 +179,8 @@ def capture(
         Working f-number; default the lens's.
     full
         Produce the full frame (else only the crop).
+    noise
+        Sensor noise on (default); False gives the noiseless raw (:func:`noiseless_raw`), for checks.
     """
     if not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
@@ -161,7 +200,8 @@ def capture(
         mean_rgb, x0, y0 = opt.electrons_rgb * t, opt.x0, opt.y0
     mean = mosaic(mean_rgb, camera.sensor.cfa, x0, y0)
     del mean_rgb
-    raw = expose(mean, camera.sensor, SensorSettings(t, exposure.analog_gain), seed, x0, y0)
+    settings = SensorSettings(t, exposure.analog_gain)
+    raw = expose(mean, camera.sensor, settings, seed, x0, y0) if noise else noiseless_raw(mean, camera, settings)
     clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)
     image = process(raw, camera, x0, y0, analog_gain=exposure.analog_gain)
     return Capture(raw, image, exposure, x0, y0, float(np.mean(raw >= clip)))

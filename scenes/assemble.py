@@ -11,7 +11,7 @@ luminous ceiling of a room to ``ambient``. The renderer renders one group at a t
 own spectrum afterwards. A lit face emits ``1 / A`` W·m⁻²·sr⁻¹ along its normal: one
 W·sr⁻¹ of on-axis LED intensity spread over the face, times cos^(m−1)θ (plus the LED's
 Lambertian wide share, :mod:`scenes.led`). A housing whose printed wall transmits light
-(``housing_transmittance`` in ``scenes/data/beacons.toml``) also glows: its cylinder carries
+(``housing_transmittance`` in ``scenes/data/beacons/*.toml``) also glows: its cylinder carries
 a Lambertian emitter of the side's group with the near-field model's leak radiance
 (:func:`scenes.near_field.housing_leak`), which is how V1's sideways-pointing in-plane LEDs
 are seen from the front.

@@ -22,7 +22,7 @@ sheet transmits diffusely), so one view (θ = 0) gives the whole table; foam alo
 several angles.
 
 Housing leak: the bore's wall is a ``diffuse_sheet`` with the printed wall's diffuse
-reflectance R and transmittance T (``scenes/data/beacons.toml``), so light that reaches
+reflectance R and transmittance T (``scenes/data/beacons/*.toml``), so light that reaches
 the wall partly leaks out through it. :func:`housing_leak` renders the housing from the
 side and returns the mean (Lambertian) radiance leaving its outer wall, which the
 beacon-scale scene puts on the housing's cylinder as a second emitter of the side's group.

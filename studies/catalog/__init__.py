@@ -3,6 +3,8 @@
 A study module has ``NAME``, ``default_options(quick) -> StudyOptions`` and
 ``run(out, options, execution) -> summary``. :data:`STUDIES` registers them by name;
 :mod:`studies.catalog.validate` (the source study's own tests) is run by its own command.
+The main job runs :data:`MAIN_JOB` and :func:`studies.catalog.index.write_index` writes its
+index page: the answers (which camera, what LED setting, how far) from their summaries.
 """
 
 from __future__ import annotations

@@ -65,11 +65,24 @@ def default_options(quick: bool) -> StudyOptions:
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
     frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
+    return write_outputs(out, options, frame)
+
+
+def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
+    """summary.json and report.html of a finished sweep's results table; returns the summary."""
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
-    _report(out, options, table, summary)
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    _report(Path(out), options, table, summary)
+    atomic_write_bytes(Path(out) / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
     return summary
+
+
+def diffuser_text(foam: bool, sheets: int, colour: str) -> str:
+    """A diffuser in words: "foam + 3 white sheets", "bare LED", "1 matched sheet"."""
+    paper = f"{sheets} {colour} sheet{'s' if sheets != 1 else ''}" if sheets else ""
+    if foam:
+        return f"foam + {paper}" if paper else "foam"
+    return paper or "bare LED"
 
 
 def configuration_table(frame):
@@ -86,6 +99,7 @@ def configuration_table(frame):
         )
         rec.update(
             frames=n,
+            detected=int(k),
             p_detect=p,
             p_low=lo,
             p_high=hi,
@@ -105,7 +119,9 @@ def configuration_table(frame):
 def recommend(table) -> list[dict]:
     """Per camera and side: of the configurations in the window at every range studied
     (best tracker), the one with the least core saturation at its worst range, ties
-    broken by the lower LED power; ``p_detect`` is its lowest over the ranges."""
+    broken by the lower LED power. ``p_detect`` and ``p_low`` are the lowest over the
+    ranges (Wilson 95 % lower bound), ``detected`` of ``frames`` the frames behind them
+    summed over the ranges; ``diffuser`` is the configuration in words."""
     out = []
     best = table[table.tracker == "best"]
     config = ["led_current_mA", "foam", "paper_sheets", "paper_colour"]
@@ -114,12 +130,17 @@ def recommend(table) -> list[dict]:
             in_window=("in_window", "all"),
             core_saturation=("core_saturation", "max"),
             p_detect=("p_detect", "min"),
+            p_low=("p_low", "min"),
+            frames=("frames", "sum"),
+            detected=("detected", "sum"),
             led_power_mW=("led_power_mW", "first"),
             side_power_mW=("side_power_mW", "first"),
         )
         window = per_config[per_config.in_window]
         if window.empty:
-            out.append({"camera": cam, "side": side, "window": "empty"})
+            out.append(
+                {"camera": cam, "side": side, "window": "empty", "configurations": len(per_config), "in_window": 0}
+            )
             continue
         pick = window.sort_values(["core_saturation", "led_power_mW"]).iloc[0]
         out.append(
@@ -127,17 +148,35 @@ def recommend(table) -> list[dict]:
                 "camera": cam,
                 "side": side,
                 "window": f"{len(window)} of {len(per_config)} configurations",
+                "in_window": len(window),
+                "configurations": len(per_config),
                 "led_current_mA": float(pick.led_current_mA),
                 "led_power_mW": float(pick.led_power_mW),
                 "side_power_mW": float(pick.side_power_mW),
                 "foam": bool(pick.foam),
                 "paper_sheets": int(pick.paper_sheets),
                 "paper_colour": str(pick.paper_colour),
+                "diffuser": diffuser_text(bool(pick.foam), int(pick.paper_sheets), str(pick.paper_colour)),
                 "p_detect": float(pick.p_detect),
+                "p_low": float(pick.p_low),
+                "frames": int(pick.frames),
+                "detected": int(pick.detected),
                 "core_saturation": float(pick.core_saturation),
             }
         )
     return out
+
+
+def recommendation_text(rec: dict) -> str:
+    """A ``recommended`` record in words."""
+    if rec.get("window") == "empty":
+        return f"no setting tried keeps P ≥ 0.95 with cores < 50 % clipped (0 of {rec['configurations']})"
+    return (
+        f"{rec['led_current_mA']:g} mA behind {rec['diffuser']}: {rec['led_power_mW']:.2g} mW per LED, "
+        f"{rec['side_power_mW']:.2g} mW for the side; {rec['detected']} of {rec['frames']} frames detected "
+        f"(lowest Wilson 95 % bound {rec['p_low']:.2f}), cores {100 * rec['core_saturation']:.0f} % clipped; "
+        f"{rec['window']} in the window"
+    )
 
 
 def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
@@ -147,48 +186,164 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
     import matplotlib.pyplot as plt
 
     rep = Report("LED brightness × diffusers: detection, colour and saturation")
+    lines = [f"{r['camera']}, {r['side']} side: {recommendation_text(r)}." for r in summary["recommended"]]
+    frames = int(table.frames.min()) if len(table) else 0
+    lines.append(
+        f"Evidence: {frames} frames per configuration and range. The window takes the observed fraction "
+        "(P ≥ 0.95) at face value; with so few frames its Wilson lower bound is far below 0.95, so it ranks "
+        "settings rather than proving them."
+    )
+    rep.lead(lines)
     rep.text(
         f"Cameras {', '.join(options.cameras)}; sides {', '.join(options.sides)}; ranges "
-        f"{', '.join(f'{r:g}' for r in options.ranges_m)} m; LED currents "
-        f"{', '.join(f'{c:g}' for c in options.currents_mA)} mA; diffusers (foam, sheets, paper) "
-        f"{'; '.join(f'{int(f)}, {n}, {c}' for f, n, c in options.diffusers)}; {options.seeds} seeds each."
+        f"{', '.join(f'{r:g}' for r in options.ranges_m)} m; LED drive "
+        f"{', '.join(f'{c:g}' for c in options.currents_mA)} mA; diffusers "
+        f"{'; '.join(diffuser_text(f, n, c) for f, n, c in options.diffusers)}; {options.seeds} seeds each. "
+        "Operating window: P(correct detection) ≥ 0.95 and marker cores < 50 % clipped at every range."
     )
     rep.heading("Recommended operating window")
-    rep.table(
-        pd.DataFrame(summary["recommended"]),
-        "Per camera and side (best tracker): P ≥ 0.95 and cores < 50 % clipped at every range",
-    )
+    rec = pd.DataFrame(summary["recommended"])
+    if "diffuser" in rec:
+        rec = rec.assign(
+            correct=[f"{d:.0f} of {n:.0f}" if n == n else "–" for d, n in zip(rec.detected, rec.frames, strict=True)]
+        )
+        rep.table(
+            rec[
+                [
+                    "camera",
+                    "side",
+                    "led_current_mA",
+                    "diffuser",
+                    "led_power_mW",
+                    "side_power_mW",
+                    "correct",
+                    "p_low",
+                    "core_saturation",
+                    "window",
+                ]
+            ],
+            "Per camera and side (best tracker): the window's setting with the least clipping",
+            labels={
+                "led_current_mA": "LED drive, mA",
+                "led_power_mW": "radiant power per LED, mW",
+                "side_power_mW": "per side (all its LEDs), mW",
+                "correct": "correct detections",
+                "p_low": "P(correct), Wilson 95 % lower bound",
+                "core_saturation": "cores clipped (worst range)",
+                "window": "settings in the window",
+            },
+            formats={
+                "led_current_mA": "{:g}",
+                "led_power_mW": "{:.2g}",
+                "side_power_mW": "{:.2g}",
+                "p_low": "{:.2f}",
+                "core_saturation": "{:.0%}",
+            },
+            css_class="keys",
+        )
     best = table[table.tracker == "best"]
     for (cam, side, r), g in best.groupby(["camera", "side", "nominal_range_m"]):
-        labels = [
-            f"{'foam' if f else 'no foam'}, {n} {c}"
-            for f, n, c in g[["foam", "paper_sheets", "paper_colour"]].drop_duplicates().itertuples(index=False)
-        ]
-        currents = sorted(set(g.led_current_mA))
-        fig, axes = plt.subplots(1, 3, figsize=(13, 0.45 * len(labels) + 1.8), sharey=True)
-        for ax, metric, title, cmap in zip(
-            axes,
-            ("p_detect", "colour_correct", "core_saturation"),
-            ("P(correct detection)", "P(correct colour)", "core saturation fraction"),
-            ("viridis", "viridis", "magma"),
-            strict=True,
-        ):
-            grid = np.full((len(labels), len(currents)), np.nan)
-            for row in g.itertuples(index=False):
-                label = f"{'foam' if row.foam else 'no foam'}, {row.paper_sheets} {row.paper_colour}"
-                grid[labels.index(label), currents.index(row.led_current_mA)] = getattr(row, metric)
-            im = ax.imshow(grid, vmin=0, vmax=1, cmap=cmap, aspect="auto")
-            ax.set_xticks(range(len(currents)), [f"{c:g}" for c in currents])
-            ax.set_xlabel("LED current, mA")
-            ax.set_title(title, fontsize=10)
-            for (i, j), v in np.ndenumerate(grid):
-                if np.isfinite(v):
-                    ax.text(
-                        j, i, f"{v:.2f}", ha="center", va="center", fontsize=7, color="white" if v < 0.5 else "black"
-                    )
-            fig.colorbar(im, ax=ax, fraction=0.04)
-        axes[0].set_yticks(range(len(labels)), labels)
-        rep.figure(fig, f"{cam}, {side} side, {r:g} m (best tracker)")
+        rep.figure(
+            _heat_maps(plt, g),
+            f"{cam}, {side} side, {r:g} m (best tracker): per diffuser and LED drive, the fraction of frames "
+            "detected correctly (with the frame counts), of correct colour, and the marker cores' clipped fraction; "
+            "boxed: in the window.",
+        )
     rep.heading("All configurations")
-    rep.table(table.drop(columns=["r_chroma", "g_chroma"]), "Per configuration and tracker")
+    shown = table.assign(
+        diffuser=[
+            diffuser_text(bool(f), int(n), str(c))
+            for f, n, c in zip(table.foam, table.paper_sheets, table.paper_colour, strict=True)
+        ],
+        correct=[f"{d} of {n}" for d, n in zip(table.detected, table.frames, strict=True)],
+        in_window=["yes" if w else "no" for w in table.in_window],
+    )
+    rep.table(
+        shown[
+            [
+                "camera",
+                "side",
+                "nominal_range_m",
+                "led_current_mA",
+                "diffuser",
+                "tracker",
+                "correct",
+                "p_low",
+                "p_high",
+                "colour_correct",
+                "core_saturation",
+                "led_power_mW",
+                "in_window",
+            ]
+        ],
+        "Per configuration and tracker",
+        labels={
+            "nominal_range_m": "range, m",
+            "led_current_mA": "LED drive, mA",
+            "correct": "correct detections",
+            "p_low": "Wilson 95 %: low",
+            "p_high": "high",
+            "colour_correct": "right colour",
+            "core_saturation": "cores clipped",
+            "led_power_mW": "power per LED, mW",
+            "in_window": "in window",
+        },
+        formats={
+            "nominal_range_m": "{:g}",
+            "led_current_mA": "{:g}",
+            "p_low": "{:.2f}",
+            "p_high": "{:.2f}",
+            "colour_correct": "{:.0%}",
+            "core_saturation": "{:.0%}",
+            "led_power_mW": "{:.2g}",
+        },
+        css_class="keys",
+    )
     rep.write(out / "report.html")
+
+
+def _heat_maps(plt, g):
+    """Three heat maps (P(correct detection), P(correct colour), core saturation) of one
+    camera, side and range: rows the diffusers, columns the LED drives; numbers at 11 pt."""
+    labels = [
+        diffuser_text(bool(f), int(n), str(c))
+        for f, n, c in g[["foam", "paper_sheets", "paper_colour"]].drop_duplicates().itertuples(index=False)
+    ]
+    currents = sorted(set(g.led_current_mA))
+    cell_w = min(0.9, 8.0 / (3 * len(currents)))
+    fig, axes = plt.subplots(
+        1,
+        3,
+        figsize=(3 * (cell_w * len(currents) + 0.9) + 2.2, 0.5 * len(labels) + 1.7),
+        sharey=True,
+        constrained_layout=True,
+    )
+    for ax, metric, title, cmap in zip(
+        axes,
+        ("p_detect", "colour_correct", "core_saturation"),
+        ("P(correct detection)", "P(correct colour)", "cores clipped"),
+        ("viridis", "viridis", "magma"),
+        strict=True,
+    ):
+        grid = np.full((len(labels), len(currents)), np.nan)
+        text = np.full(grid.shape, "", dtype=object)
+        window = np.zeros(grid.shape, dtype=bool)
+        for row in g.itertuples(index=False):
+            i = labels.index(diffuser_text(bool(row.foam), int(row.paper_sheets), str(row.paper_colour)))
+            j = currents.index(row.led_current_mA)
+            grid[i, j] = getattr(row, metric)
+            text[i, j] = f"{row.detected}/{row.frames}" if metric == "p_detect" else f"{grid[i, j]:.2f}"
+            window[i, j] = bool(row.in_window)
+        im = ax.imshow(grid, vmin=0, vmax=1, cmap=cmap, aspect="auto")
+        ax.set_xticks(range(len(currents)), [f"{c:g}" for c in currents], fontsize=10)
+        ax.set_xlabel("LED drive, mA", fontsize=10)
+        ax.set_title(title, fontsize=11)
+        for (i, j), v in np.ndenumerate(grid):
+            if np.isfinite(v):
+                dark = v < 0.5 if cmap == "viridis" else v < 0.6
+                ax.text(j, i, text[i, j], ha="center", va="center", fontsize=11, color="white" if dark else "black")
+                if window[i, j]:
+                    ax.add_patch(plt.Rectangle((j - 0.46, i - 0.46), 0.92, 0.92, fill=False, ec="red", lw=2))
+        fig.colorbar(im, ax=ax, fraction=0.08, pad=0.03)
+    axes[0].set_yticks(range(len(labels)), labels, fontsize=10)
+    return fig

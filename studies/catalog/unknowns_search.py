@@ -124,7 +124,8 @@ def tasks(points: Sequence[dict], space: dict[str, Unknown], seeds: int) -> list
     for index, values in enumerate(points):
         for name, condition in CONDITIONS.items():
             camera = condition["scenario"]["camera"]
-            options = StudyOptions(cameras=(camera,), seeds=seeds, jitter_poses=1, render=dict(RENDER))
+            # each condition's task options say its frame (webcam-150mm: the whole frame)
+            options = StudyOptions(cameras=(camera,), seeds=seeds, jitter_poses=1, render=dict(RENDER), frame="crop")
             for side in SIDE_COLOURS:
                 scenario = {**BUILT, **condition["scenario"], "side": side, "paper_colour": "matched"}
                 scenario["led_current_mA"] = 20.0

@@ -15,6 +15,7 @@ from __future__ import annotations
 import io
 import itertools
 import json
+import math
 from pathlib import Path
 
 import cv2
@@ -23,8 +24,14 @@ import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
 from studies.engine.frame import target_crop_png
-from studies.engine.max_range import estimate_max_range
-from studies.engine.metrics import confusion_matrix, delta_e_2000, mahalanobis_separability
+from studies.engine.max_range import (
+    estimate_max_range,
+    far_interval_text,
+    far_limit_text,
+    near_failures_text,
+    working_range_text,
+)
+from studies.engine.metrics import bayes_error, confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.engine.report import Report
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import detection_curve
@@ -64,26 +71,61 @@ def default_options(quick: bool) -> StudyOptions:
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
     frame = sweep(NAME, grid_conditions(options), options, out, execution=execution)
+    mosaic_png(options, out)
+    return write_outputs(out, options, frame)
+
+
+def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
+    """summary.json and report.html of a finished sweep's results table (the mosaic is
+    taken from ``out/mosaic.png`` where :func:`mosaic_png` wrote it); returns the summary."""
+    out = Path(out)
     summary = analyse(frame)
-    mosaic = mosaic_png(options, out)
+    mosaic = (out / "mosaic.png").read_bytes() if (out / "mosaic.png").is_file() else None
     _report(out, options, frame, summary, mosaic)
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
     return summary
 
 
 def analyse(frame) -> dict:
-    """Headline numbers: max range per camera, drive and tracker; colour separability per
-    camera and drive; cameras ranked by their best drive's maximum range (best tracker, to
-    0.1 m), then by that drive's colour separability."""
+    """Headline numbers.
+
+    * ``max_range``: the working range per camera, beacon, environment, drive and tracker
+      (best estimator; :class:`studies.engine.max_range.MaxRange` fields and their wording);
+    * ``colour_separability``: per camera and drive, the sides' pairwise separability and how
+      many of the best tracker's detections named the right side (``right_colour`` of
+      ``detections``);
+    * ``ranking``: cameras by their best drive's far limit (best tracker, to 0.1 m; ``at_least``:
+      no fall-off up to the farthest range tried, printed "≥"), then by that drive's colour
+      separability; ``tied_on_range`` names the cameras whose far limits are equal;
+    * ``yaws_deg``: the yaws swept (every record pools them).
+    """
     summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
+    if "nominal_yaw_deg" in frame:
+        summary["yaws_deg"] = sorted(float(y) for y in set(frame.nominal_yaw_deg))
     keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
     for key, g in frame[frame.estimator == "best"].groupby(keys):
-        mr = estimate_max_range(g.to_dict("records"))
-        summary["max_range"].append({**dict(zip(keys, key, strict=True)), **mr.to_dict()})
+        rec = {**dict(zip(keys, key, strict=True)), **estimate_max_range(g.to_dict("records")).to_dict()}
+        rec.update(
+            working_range=working_range_text(rec),
+            far_limit=far_limit_text(rec),
+            far_interval=far_interval_text(rec),
+            failures_nearer=near_failures_text(rec),
+        )
+        summary["max_range"].append(rec)
     frames = frame[(frame.tracker == "best") & (frame.estimator == "best")]  # one row per frame
     for (camera, current), g in frames.groupby(["camera", "led_current_mA"]):
-        summary["colour_separability"].append({"camera": camera, "led_current_mA": current, **colour_separability(g)})
-    best: dict[str, tuple[float, float, float]] = {}  # camera -> (max range, separability, current)
+        detected = g[g.detected.astype(bool)]
+        summary["colour_separability"].append(
+            {
+                "camera": camera,
+                "led_current_mA": float(current),
+                **colour_separability(g),
+                "frames": len(g),
+                "detections": len(detected),
+                "right_colour": int(detected.side_correct.astype(bool).sum()),
+            }
+        )
+    best: dict[str, dict] = {}
     for rec in summary["max_range"]:
         if rec["tracker"] != "best":
             continue
@@ -96,20 +138,34 @@ def analyse(frame) -> dict:
             None,
         )
         # ranges compared to 0.1 m: finer differences are the pose jitter of the farthest frames
-        cand = (round(rec["max_range_m"], 1), np.nan_to_num(sep if sep is not None else 0.0), rec["led_current_mA"])
-        if rec["camera"] not in best or cand[:2] > best[rec["camera"]][:2]:
-            best[rec["camera"]] = cand
-    ranking = sorted(best, key=lambda c: (-best[c][0], -best[c][1]))
-    summary["ranking"] = [
-        {
-            "rank": i + 1,
-            "camera": c,
-            "max_range_m": best[c][0],
-            "at_led_current_mA": best[c][2],
-            "min_colour_mahalanobis": best[c][1],
+        cand = {
+            "reach": round(rec["max_range_m"], 1),
+            "sep": sep if sep is not None and not math.isnan(sep) else 0.0,
+            "rec": rec,
         }
-        for i, c in enumerate(ranking)
-    ]
+        old = best.get(rec["camera"])
+        if old is None or (cand["reach"], cand["sep"]) > (old["reach"], old["sep"]):
+            best[rec["camera"]] = cand
+    ranking = sorted(best, key=lambda c: (-best[c]["reach"], -best[c]["sep"]))
+    for i, c in enumerate(ranking):
+        rec = best[c]["rec"]
+        tied = [o for o in ranking if o != c and best[o]["reach"] == best[c]["reach"]]
+        summary["ranking"].append(
+            {
+                "rank": i + 1,
+                "camera": c,
+                "max_range_m": best[c]["reach"],
+                "at_least": bool(rec["at_least"]),
+                "far_limit": rec["far_limit"],
+                "far_interval": rec["far_interval"],
+                "working_range": rec["working_range"],
+                "at_led_current_mA": rec["led_current_mA"],
+                "environment": rec["environment"],
+                "beacon": rec["beacon"],
+                "min_colour_mahalanobis": best[c]["sep"],
+                "tied_on_range": tied,
+            }
+        )
     return summary
 
 
@@ -118,7 +174,10 @@ def colour_separability(frames) -> dict:
 
     Each frame contributes its five markers' chromaticities (r, g); the distance
     between two sides is the Mahalanobis distance of their chromaticity samples under
-    the pooled covariance, and ΔE2000 compares their mean sRGB colours.
+    the pooled covariance (inf: they do not overlap in any direction, a perfect
+    separation), with the Bayes error Φ(−d/2) of two Gaussian classes that far apart;
+    ΔE2000 compares their mean sRGB colours. ``min_mahalanobis`` is the closest pair's
+    distance (None without two sides with samples).
     """
     samples, means = {}, {}
     for side, g in frames.groupby("side"):
@@ -134,19 +193,38 @@ def colour_separability(frames) -> dict:
         means[side] = np.nanmean(srgb, axis=0)
     pairs = []
     for a, b in itertools.combinations(sorted(samples), 2):
+        d = mahalanobis_separability(samples[a], samples[b])
         pairs.append(
             {
                 "pair": f"{a}-{b}",
-                "mahalanobis": mahalanobis_separability(samples[a], samples[b]),
+                "mahalanobis": d,
+                "bayes_error": bayes_error(d) if not math.isnan(d) else math.nan,
                 "delta_e_2000": delta_e_2000(means[a], means[b]),
             }
         )
-    m = [p["mahalanobis"] for p in pairs if np.isfinite(p["mahalanobis"])]
+    m = [p["mahalanobis"] for p in pairs if not math.isnan(p["mahalanobis"])]
     return {
         "pairs": pairs,
         "min_mahalanobis": float(min(m)) if m else None,
         "mean_srgb": {k: v.tolist() for k, v in means.items()},
     }
+
+
+def separability_text(sep: dict) -> str:
+    """A camera's colour separability in words: "perfect (no overlap)" or "d = 9.9
+    (red-green; Bayes error 4e-07)", from a ``colour_separability`` record."""
+    pairs = [p for p in sep.get("pairs", []) if not math.isnan(p["mahalanobis"])]
+    if not pairs:
+        return "not measured (fewer than two sides seen)"
+    worst = min(pairs, key=lambda p: p["mahalanobis"])
+    if math.isinf(worst["mahalanobis"]):
+        return f"perfect: no overlap between any two sides ({len(pairs)} pair{'s' if len(pairs) > 1 else ''})"
+    return f"d = {worst['mahalanobis']:.3g} ({worst['pair']}; Bayes error {small_probability(worst['bayes_error'])})"
+
+
+def small_probability(p: float) -> str:
+    """A probability to 2 significant figures, "< 1e-6" below 10⁻⁶."""
+    return "< 1e-6" if p < 1e-6 else f"{p:.2g}"
 
 
 def mosaic_png(options: StudyOptions, out: Path) -> bytes:
@@ -178,7 +256,8 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
                     diffusers=options.diffusers[:1],
                 )
             )
-            task = frame_tasks(cond, StudyOptions(cameras=(cam,), seeds=1, jitter_poses=1, render=options.render))[0]
+            one = StudyOptions(cameras=(cam,), seeds=1, jitter_poses=1, render=options.render, frame="crop")
+            task = frame_tasks(cond, one)[0]
             png = target_crop_png(task)
             img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
             ax = axes[i, j]
@@ -186,86 +265,255 @@ def mosaic_png(options: StudyOptions, out: Path) -> bytes:
             ax.set_xticks([])
             ax.set_yticks([])
             if i == 0:
-                ax.set_title(f"{r:g} m")
+                ax.set_title(f"{r:g} m", fontsize=13)
             if j == 0:
-                ax.set_ylabel(cam, fontsize=9)
+                ax.set_ylabel(cam, fontsize=12)
     fig.suptitle(
         f"{beacon.upper()} {options.sides[0]} side at {options.currents_mA[0]:g} mA, 240 mm square around marker 1\n"
         "saved JPEG, camera pixels shown as blocks"
     )
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     plt.close(fig)
     atomic_write_bytes(out / "mosaic.png", buf.getvalue())
     return buf.getvalue()
 
 
-def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: bytes) -> None:
+RANGE_LABELS = {
+    "camera": "camera",
+    "beacon": "beacon",
+    "environment": "room",
+    "led_current_mA": "LED drive, mA",
+    "tracker": "tracker",
+    "working_range": "working range (P ≥ 0.95)",
+    "far_interval": "far limit, 95 % interval",
+    "limiting_cause": "what ends it",
+    "failures_nearer": "failures nearer than the best range",
+    "correct": "correct frames",
+}
+"""Columns of the working-range table and their headers."""
+CAMERA_STYLES = {
+    "logitech-c270": {"color": "C0", "marker": "o", "ls": "-"},
+    "spedal-920": {"color": "C1", "marker": "s", "ls": "--"},
+    "canon-t6-18mm": {"color": "C2", "marker": "^", "ls": "-."},
+    "canon-t6-10mm": {"color": "C3", "marker": "D", "ls": ":"},
+}
+"""A colour, marker and line style per camera, the same in every panel."""
+
+
+def lead_lines(summary: dict) -> list[str]:
+    """The answer in sentences: the ranking (with ties said as ties) and, per camera, its best
+    drive's working range and colour separability."""
+    ranking = summary["ranking"]
+    if not ranking:
+        return ["No frames."]
+    lines = []
+    top = ranking[0]
+    if top["tied_on_range"]:
+        names = ", ".join([top["camera"], *top["tied_on_range"]])
+        lines.append(
+            f"Tied on range: {names} all reach {top['far_limit']}"
+            + (" (the farthest range tried), so this sweep cannot rank them by range" if top["at_least"] else "")
+            + f"; ranked by colour separability, {top['camera']} comes first."
+        )
+    else:
+        lines.append(f"Farthest: {top['camera']}, {top['far_limit']} at {top['at_led_current_mA']:g} mA.")
+    seps = {(s["camera"], s["led_current_mA"]): s for s in summary["colour_separability"]}
+    for r in ranking:
+        sep = seps.get((r["camera"], r["at_led_current_mA"]), {})
+        colour = separability_text(sep) if sep else "not measured"
+        right = f"; {sep['right_colour']} of {sep['detections']} detections the right colour" if sep else ""
+        lines.append(
+            f"{r['rank']}. {r['camera']} at {r['at_led_current_mA']:g} mA ({r['beacon'].upper()}, {r['environment']}): "
+            f"works {r['working_range']} (far limit 95 % interval {r['far_interval']}); colour separability "
+            f"{colour}{right}."
+        )
+    return lines
+
+
+def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: bytes | None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rep = Report("Webcam vs DSLR: how far each camera sees the beacon, and whether it keeps the colours")
+    per_point = frame[(frame.tracker == "best") & (frame.estimator == "best")].groupby(
+        ["camera", "beacon", "side", "environment", "led_current_mA", "nominal_range_m"]
+    )
+    rep.lead(
+        [
+            *lead_lines(summary),
+            f"Evidence: {int(per_point.size().min()) if len(frame) else 0} frames per camera, side, range and drive. "
+            "An interval from 0 m means the frames cannot exclude that no range reaches P ≥ 0.95; '≥' means no "
+            "fall-off up to the farthest range tried.",
+        ]
+    )
+    currents = sorted(set(frame.led_current_mA))
     rep.text(
         f"{len(frame) // 4} frames: cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; "
         f"sides {', '.join(options.sides)}; ranges {', '.join(f'{r:g}' for r in options.ranges_m)} m; "
-        f"environments {', '.join(options.environments)}; {options.seeds} seeds per condition. Markers: foam + 1 "
-        "sheet of matched paper at the datasheet current; T6 at ISO 6400, 1/60 s; webcams expose automatically."
+        f"environments {', '.join(options.environments)}; LED drive {' and '.join(f'{c:g}' for c in currents)} mA "
+        "(20 mA is the datasheet's test current; the study dimmed its LEDs to an unrecorded setting); "
+        f"{options.seeds} seeds per condition. Markers: foam + 1 sheet of matched paper; T6 at ISO 6400, 1/60 s; "
+        "webcams expose automatically."
     )
     rep.heading("Ranking")
-    rep.table(pd.DataFrame(summary["ranking"]), "Cameras by maximum range (best tracker), then colour separability")
+    ranking = pd.DataFrame(summary["ranking"])
+    if not ranking.empty:
+        ranking = ranking.assign(tied_on_range=[", ".join(t) or "–" for t in ranking.tied_on_range])
+        rep.table(
+            ranking[
+                [
+                    "rank",
+                    "camera",
+                    "far_limit",
+                    "far_interval",
+                    "at_led_current_mA",
+                    "min_colour_mahalanobis",
+                    "tied_on_range",
+                ]
+            ],
+            "Cameras by far limit (best tracker, their best drive), then colour separability",
+            labels={
+                "far_limit": "far limit",
+                "far_interval": "far limit, 95 % interval",
+                "at_led_current_mA": "at LED drive, mA",
+                "min_colour_mahalanobis": "colour separability (closest pair, Mahalanobis d)",
+                "tied_on_range": "tied on range with",
+            },
+            formats={"at_led_current_mA": "{:g}", "min_colour_mahalanobis": "{:.3g}"},
+            css_class="keys",
+        )
     rep.heading("Detection probability versus range")
-    curve = detection_curve(frame[frame.estimator == "best"], ["camera", "tracker", "led_current_mA", "beacon"])
-    currents = sorted(set(curve.led_current_mA))
-    fig, axes = plt.subplots(
-        2, len(currents), figsize=(5.5 * len(currents), 7), sharex=True, sharey=True, squeeze=False
-    )
-    colours = {cam: f"C{i}" for i, cam in enumerate(options.cameras)}
-    for (i, tracker), (j, current) in itertools.product(enumerate(("thesis", "best")), enumerate(currents)):
-        ax = axes[i][j]
-        sel = curve[(curve.tracker == tracker) & (curve.led_current_mA == current)]
-        for (cam, beacon), g in sel.groupby(["camera", "beacon"]):
-            ax.errorbar(
-                g.nominal_range_m,
-                g.p_detect,
-                yerr=[np.clip(g.p_detect - g.p_low, 0, None), np.clip(g.p_high - g.p_detect, 0, None)],
-                marker="o" if beacon == "v2" else "s",
-                ls="-" if beacon == "v2" else ":",
-                color=colours.get(cam),
-                capsize=3,
-                label=f"{cam}, {beacon}",
-            )
-        ax.axhline(0.95, color="grey", ls=":", lw=1)
-        ax.set_title(f"{tracker} tracker, {current:g} mA", fontsize=10)
-        ax.set_xlabel("range, m")
-        ax.set_ylabel("P(correct side, 5 markers numbered)")
-    axes[0][-1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
     rep.figure(
-        fig,
-        "Probability of a correct detection with Wilson 95 % intervals, over sides, environments and seeds; "
-        "dotted line: 0.95.",
+        _curves_figure(plt, frame, options),
+        "Fraction of frames with a correct detection (right side, five markers numbered), with Wilson 95 % "
+        "intervals, over sides, environments and seeds; dotted line: 0.95. One colour, marker and line style per "
+        "camera; the cameras' points are offset sideways so that equal curves stay visible.",
     )
-    rep.heading("Maximum range")
+    rep.heading("Working range")
+    table = pd.DataFrame(summary["max_range"])
+    table = table.assign(
+        correct=[f"{k} of {n}" for k, n in zip(table.successes, table.frames, strict=True)],
+        failures_nearer=[t or "– (none tried nearer)" for t in table.failures_nearer],
+    )
     rep.table(
-        pd.DataFrame(summary["max_range"]).drop(columns=["frames", "successes"]),
-        "Largest range with P(correct) ≥ 0.95 (logistic fit, bootstrap 95 % interval) and the limiting cause",
+        table[list(RANGE_LABELS)],
+        "Where P(correct pose) ≥ 0.95 (logistic rise and fall-off; profile-likelihood 95 % interval) and what ends it",
+        labels=RANGE_LABELS,
+        formats={"led_current_mA": "{:g}"},
+        css_class="keys",
     )
     rep.heading("Colour separability")
-    rows = [{"camera": s["camera"], **p} for s in summary["colour_separability"] for p in s["pairs"]]
+    rows = [
+        {
+            "camera": s["camera"],
+            "led_current_mA": s["led_current_mA"],
+            **p,
+            "right_colour": f"{s['right_colour']} of {s['detections']}",
+        }
+        for s in summary["colour_separability"]
+        for p in s["pairs"]
+    ]
     if rows:
-        rep.table(pd.DataFrame(rows), "Pairwise separability of side colours (chromaticity Mahalanobis; ΔE2000)")
+        rep.table(
+            pd.DataFrame(rows),
+            "Pairwise separability of the sides' colours per camera and LED drive (marker chromaticities, best "
+            "tracker's frames); inf: the samples do not overlap (perfect separation)",
+            labels={
+                "led_current_mA": "LED drive, mA",
+                "pair": "sides",
+                "mahalanobis": "Mahalanobis d",
+                "bayes_error": "Bayes error Φ(−d/2)",
+                "delta_e_2000": "ΔE2000 of mean colours",
+                "right_colour": "detections of the right colour",
+            },
+            formats={
+                "led_current_mA": "{:g}",
+                "mahalanobis": "{:.3g}",
+                "bayes_error": small_probability,
+                "delta_e_2000": "{:.3g}",
+            },
+            css_class="keys",
+        )
     frames = frame[frame.estimator == "best"]
-    for tracker in ("thesis", "best"):
+    for tracker in ("best", "thesis"):
         g = frames[frames.tracker == tracker]
         sides = sorted(set(g.side))
         labels = list(sides) + [c for c in ("red", "green", "blue", "yellow") if c not in sides]
-        for cam, gc in g.groupby("camera"):
+        blocks = []
+        for (cam, current), gc in g.groupby(["camera", "led_current_mA"]):
             m = confusion_matrix(list(gc.side), [x if isinstance(x, str) else None for x in gc.side_detected], labels)
-            table = pd.DataFrame(m[: len(sides)], columns=[*labels, "none"])
-            table.insert(0, "true side", sides)
-            rep.table(table, f"Colour confusion, {tracker} tracker, {cam} (frames)", float_format="{:.0f}")
-    rep.heading("Mosaic")
-    rep.image_png(mosaic, "The same target at 2, 5 and 7 m as each camera saves it")
+            block = pd.DataFrame(m[: len(sides)], columns=[*(f"as {c}" for c in labels), "not found"])
+            block.insert(0, "true side", sides)
+            block.insert(0, "LED drive, mA", f"{current:g}")
+            block.insert(0, "camera", cam)
+            blocks.append(block)
+        if blocks:
+            rep.table(
+                pd.concat(blocks, ignore_index=True),
+                f"Colour confusion, {tracker} tracker: frames of each true side by the side the tracker named",
+                float_format="{:.0f}",
+                css_class="keys",
+            )
+    if mosaic is not None:
+        rep.heading("Mosaic")
+        rep.image_png(mosaic, "The same target at 2, 5 and 7 m as each camera saves it")
     rep.write(out / "report.html")
+
+
+def _curves_figure(plt, frame, options: StudyOptions):
+    """P(correct detection) versus range: rows the trackers, columns the drives."""
+    curve = detection_curve(frame[frame.estimator == "best"], ["camera", "tracker", "led_current_mA", "beacon"])
+    currents = sorted(set(curve.led_current_mA))
+    cams = [c for c in options.cameras if c in set(curve.camera)] + sorted(set(curve.camera) - set(options.cameras))
+    ranges = sorted(set(curve.nominal_range_m))
+    step = min(np.diff(ranges)) if len(ranges) > 1 else 1.0
+    fig, axes = plt.subplots(
+        2,
+        len(currents),
+        figsize=(min(4.4 * len(currents), 8.6) + 2.4, 7.6),
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+        constrained_layout=True,
+    )
+    series = [(cam, beacon) for cam in cams for beacon in sorted(set(curve.beacon))]
+    for (i, tracker), (j, current) in itertools.product(enumerate(("best", "thesis")), enumerate(currents)):
+        ax = axes[i][j]
+        sel = curve[(curve.tracker == tracker) & (curve.led_current_mA == current)]
+        for n, (cam, beacon) in enumerate(series):
+            g = sel[(sel.camera == cam) & (sel.beacon == beacon)]
+            if g.empty:
+                continue
+            style = dict(CAMERA_STYLES.get(cam, {"color": f"C{4 + n % 6}", "marker": "v", "ls": "-"}))
+            if beacon != "v2":
+                style.update(ls=(0, (1, 3)), mfc="white")
+            dx = (n - (len(series) - 1) / 2) * 0.05 * step
+            ax.errorbar(
+                g.nominal_range_m + dx,
+                g.p_detect,
+                yerr=[np.clip(g.p_detect - g.p_low, 0, None), np.clip(g.p_high - g.p_detect, 0, None)],
+                capsize=3,
+                lw=1.6,
+                ms=7,
+                label=f"{cam}, {beacon.upper()}",
+                **style,
+            )
+        ax.axhline(0.95, color="grey", ls=":", lw=1)
+        ax.set_title(f"{tracker} tracker, {current:g} mA", fontsize=11)
+        ax.set_xticks(ranges)
+        if i == 1:
+            ax.set_xlabel("range, m", fontsize=10)
+        if j == 0:
+            ax.set_ylabel("P(correct detection)", fontsize=10)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    for ax in axes.flat:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, fontsize=9, loc="outside right center")
+    return fig

@@ -36,6 +36,7 @@ from studies.cli.common import (
 )
 from studies.engine import colour_reach as reach
 from studies.experiments import bench as b
+from studies.experiments import crop_vs_full as cvf
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
@@ -286,6 +287,46 @@ def unknowns_search(
     )
 
 
+def crop_vs_full(
+    out: opt.Out,
+    cameras: Annotated[
+        str | None,
+        typer.Option("--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all"),
+    ] = None,
+    ranges_m: Annotated[
+        str | None, typer.Option("--ranges-m", help="Comma-separated ranges, m.", show_default="2,5")
+    ] = None,
+    currents_ma: Annotated[
+        str | None, typer.Option("--currents-ma", help="Comma-separated LED currents, mA.", show_default="20")
+    ] = None,
+    seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per condition.")] = cvf.SEEDS,
+) -> None:
+    """What the detectors see on the rendered crop versus the camera's whole frame (same frames, same seeds).
+
+    V2 red side, yaw 0, dark, foam + 1 matched sheet. Writes crop_vs_full.csv (per frame and
+    tracker: blobs, success, range error, time per path), crop_vs_full_summary.csv and
+    crop_vs_full.json (with the cost per frame of each path).
+    """
+    names = _cameras(cameras, camera_names())
+    ranges = parse_list("ranges-m", ranges_m, float) or cvf.RANGES_M
+    currents = parse_list("currents-ma", currents_ma, float) or (20.0,)
+    check_seeds("seeds", seeds)
+    cvf.comparison_tasks(names, ranges, seeds, currents)  # validates every condition before any work
+    check_render_cache()
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    with console.status(f"crop vs full frame: {len(names)} cameras x {len(ranges)} ranges x {seeds} seeds ..."):
+        result = cvf.run(out, names, ranges, seeds, currents)
+    for c in result.cost:
+        console.print(
+            f"{c['camera']}: {c['seconds_crop']:.2f} s per crop frame, {c['seconds_full']:.2f} s per whole frame "
+            f"(x{c['ratio']:.1f})"
+        )
+    console.print(
+        f"wrote {out}/crop_vs_full.csv, crop_vs_full_summary.csv, crop_vs_full.json ({time.perf_counter() - t0:.0f} s)"
+    )
+
+
 COMMANDS = {
     "e2e-detection": e2e_detection,
     "saturation-table": saturation_table,
@@ -293,4 +334,5 @@ COMMANDS = {
     "bench": bench,
     "unknowns-search": unknowns_search,
     "colour-reach": colour_reach,
+    "crop-vs-full": crop_vs_full,
 }

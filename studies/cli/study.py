@@ -11,26 +11,44 @@ import typer
 
 from studies.catalog import MAIN_JOB, STUDIES
 from studies.catalog import validate as validation
+from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console, parse_list, prepare_out_dir, rich_progress
-from studies.engine.report import Report
+from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, prepare_out_dir
 from studies.engine.sweep import Execution
+
+OutResumable = Annotated[
+    Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory (re-run to resume).")
+]
 
 
 def _execution(workers: int | None, scheduler: str | None) -> Execution:
-    if workers is not None and workers < 1:
-        raise UsageError(f"workers: expected an integer >= 1, got {workers}")
-    return Execution(workers=workers, scheduler=scheduler, progress=rich_progress)
+    """Validated :class:`Execution` of a sweep (:func:`studies.cli.common.execution`)."""
+    return execution(workers, scheduler)
 
 
 def study(
     name: Annotated[str, typer.Argument(help=f"One of: {', '.join(STUDIES)}.")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    out: OutResumable,
     quick: Annotated[bool, typer.Option("--quick", help="The small grid the main job runs.")] = False,
-    cameras: Annotated[str | None, typer.Option("--cameras", help="Comma-separated camera names.")] = None,
-    ranges: Annotated[str | None, typer.Option("--ranges", help="Comma-separated ranges, m.")] = None,
-    currents: Annotated[str | None, typer.Option("--currents", help="Comma-separated LED currents, mA.")] = None,
+    cameras: Annotated[
+        str | None,
+        typer.Option(
+            "--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="the study's"
+        ),
+    ] = None,
+    beacons: Annotated[
+        str | None,
+        typer.Option(
+            "--beacons", help="Comma-separated beacon names (see 'beacon-sim beacons').", show_default="the study's"
+        ),
+    ] = None,
+    ranges_m: Annotated[
+        str | None, typer.Option("--ranges-m", help="Comma-separated ranges, m.", show_default="the study's")
+    ] = None,
+    currents_ma: Annotated[
+        str | None, typer.Option("--currents-ma", help="Comma-separated LED currents, mA.", show_default="the study's")
+    ] = None,
     seeds: opt.Seeds = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
@@ -39,10 +57,12 @@ def study(
     if name not in STUDIES:
         raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
     module = STUDIES[name]
+    check_seeds("seeds", seeds)
     options = module.default_options(quick).with_overrides(
         cameras=parse_list("cameras", cameras),
-        ranges_m=parse_list("ranges", ranges, float),
-        currents_mA=parse_list("currents", currents, float),
+        beacons=parse_list("beacons", beacons),
+        ranges_m=parse_list("ranges-m", ranges_m, float),
+        currents_mA=parse_list("currents-ma", currents_ma, float),
         seeds=seeds,
     )
     options.validate()
@@ -54,7 +74,7 @@ def study(
 
 
 def validate(
-    out: Annotated[Path, typer.Option("--out", help="Output directory (re-run to resume).")],
+    out: OutResumable,
     quick: Annotated[bool, typer.Option("--quick", help="Fewer conditions and seeds.")] = False,
     seeds: opt.Seeds = None,
     calibration: Annotated[
@@ -67,14 +87,13 @@ def validate(
     ] = REFERENCE_SEARCH,
     nominal: Annotated[bool, typer.Option("--nominal", help="Ignore --calibration: the unknowns at nominal.")] = False,
     points: Annotated[
-        int | None, typer.Option("--points", help="Calibrated points to run each test at [default: 2].")
+        int | None, typer.Option("--points", help="Calibrated points to run each test at.", show_default="2")
     ] = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
     """Predict the source study's tests with its own detector and settings (validation.csv, report.html)."""
-    if seeds is not None and seeds < 1:
-        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    check_seeds("seeds", seeds)
     if points is not None and points < 1:
         raise UsageError(f"points: expected an integer >= 1, got {points}")
     if not nominal and not calibration.is_file():
@@ -83,6 +102,8 @@ def validate(
         calibrated_set(calibration) if not nominal else None
     except ValueError as e:
         raise UsageError(str(e)) from None
+    except OSError as e:  # unreadable
+        raise UsageError(f"calibration: expected a readable file, got {calibration} ({e.strerror or e})") from None
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
@@ -91,22 +112,21 @@ def validate(
 
 
 def main_job(
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("out/main-job"),
+    out: Annotated[Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory.")] = Path(
+        "out/main-job"
+    ),
     workers: opt.Workers = None,
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults."""
     execution = _execution(workers, None)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    index = Report("beacon-sim main job: quick studies")
     for name in MAIN_JOB:
         module = STUDIES[name]
         options = module.default_options(True)
         options.validate()
         module.run(prepare_out_dir(out / name), options, execution)
-        index.parts.append(f"<p><a href='{name}/report.html'>{name}</a></p>")
-    index.text(f"Finished in {time.perf_counter() - t0:.0f} s.", note=True)
-    index.write(out / "index.html")
+    write_index(out, elapsed_s=time.perf_counter() - t0)
     console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 
 

@@ -10,13 +10,18 @@ worker process or a Dask cluster):
 ``trackers``, ``estimators``  which detectors to run (default both of each)
 ``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
 ``tags``       optional fields copied into every row (e.g. the test's name)
-``full_frame`` capture and detect on the whole frame instead of the rendered crop
+``full_frame`` capture and detect on the whole frame instead of the rendered crop (study tasks
+               have it by default: :attr:`studies.engine.tasks.StudyOptions.frame`); the rest of
+               the frame is the low-resolution background render, with the sensor's noise,
+               ISP and JPEG on every pixel, so the detectors see the false blobs the camera makes
+``noise``      optional, default True; False captures the noiseless frame (no temporal or fixed-
+               pattern sensor noise: :func:`camera_models.capture.capture`), for checks
 ``quest_weights``  optional ``tuned`` (default, the study's) or ``equal`` QUEST weights
 ``rectification``  optional ``{"alpha": 0 or 1}``: undistort before detecting, as the study's
                rectification did (ideal calibration: :mod:`camera_models.rectification`)
 ``align_px``   optional: pad the rendered crop with zero radiance so its origin and size are
                multiples of this (JPEG blocks and the study's 50 % resize then group the
-               pixels as in the full frame)
+               pixels as in the full frame); ignored with ``full_frame`` (aligned by itself)
 ``camera_overrides``  optional: camera-model fields to replace, ``{"lens.f_number": 5.6}``
                (:func:`camera_models.camera.with_overrides`; e.g. from :func:`studies.engine.unknowns.apply`);
                rows then carry them as ``camera.<path>`` columns
@@ -56,9 +61,12 @@ from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
-FRAME_VERSION = 3
+FRAME_VERSION = 4
 """Bump when a change alters the rows a task produces (invalidates stored results).
-3: rows carry the detector's failure code and the true side's blob count."""
+3: rows carry the detector's failure code and the true side's blob count.
+4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
+and ``blobs`` (every blob the tracker found); ``align_px`` is ignored on whole frames, and an aligned
+crop's unit render is padded with it (it was not: the lens saw the render shifted by the padding)."""
 
 
 def frame_scenario(task: dict):
@@ -106,6 +114,7 @@ def capture_frame(task: dict) -> CapturedFrame:
         exposure,
         f_number=settings.get("f_number"),
         full=bool(task.get("full_frame")),
+        noise=bool(task.get("noise", True)),
     )
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)
@@ -129,6 +138,7 @@ def simulate_frame(task: dict) -> list[dict]:
         **task.get("tags", {}),
         **{f"camera.{path}": value for path, value in (task.get("camera_overrides") or {}).items()},
         "seed": int(task["seed"]),
+        "frame": "full" if task.get("full_frame") else "crop",
         "nominal_range_m": task.get("nominal", {}).get("range_m", scenario.range_m),
         "nominal_yaw_deg": task.get("nominal", {}).get("yaw_deg", scenario.yaw_deg),
         "exposure_s": cap.exposure.exposure_s,
@@ -178,6 +188,7 @@ def simulate_frame(task: dict) -> list[dict]:
                     "reason": ev.get("reason") or "",
                     "failure": ev.get("failure") or "",
                     "side_blobs": ev.get("side_blobs"),
+                    "blobs": len(tracked[tracker].blobs) if tracker in tracked else None,
                 }
             )
     return rows
@@ -290,7 +301,7 @@ def frame_inputs(task: dict):
     while len(_RENDERS) > 4:
         _RENDERS.pop(next(iter(_RENDERS)))
     radiance, background = (None if r is None else with_led_current(r, scenario.current_mA) for r in held)
-    if task.get("align_px"):
+    if task.get("align_px") and not task.get("full_frame"):  # a whole frame is aligned by itself
         radiance = aligned_radiance(radiance, int(task["align_px"]))
     return scenario, camera, radiance, background
 
@@ -310,7 +321,10 @@ def camera_with_overrides(camera: Camera, overrides: dict | None) -> Camera:
 def aligned_radiance(radiance: SpectralRadiance, align: int) -> SpectralRadiance:
     """``radiance`` padded with zero radiance so the crop's origin and size are multiples of ``align``
     (within the frame). The dark surroundings return ~1e-6 of the LED radiance, so the
-    padded crop's pixels equal the full frame's apart from the noise realisation."""
+    padded crop's pixels equal the full frame's apart from the noise realisation. A component's
+    unit render (``unit_image``, which the lens stage uses instead of the scaled image) is padded
+    alike; before frame version 4 it was not, and aligned crops showed the unpadded render
+    shifted by the padding."""
     g = radiance.grid
     x0, y0 = (g.x0 // align) * align, (g.y0 // align) * align
     x1 = min(g.frame_width_px, -(-(g.x0 + g.width) // align) * align)
@@ -319,7 +333,14 @@ def aligned_radiance(radiance: SpectralRadiance, align: int) -> SpectralRadiance
         return radiance
     s = g.oversampling
     pad = ((s * (g.y0 - y0), s * (y1 - g.y0 - g.height)), (s * (g.x0 - x0), s * (x1 - g.x0 - g.width)))
-    comps = tuple(replace(c, image_W_m2_sr=np.pad(c.image_W_m2_sr, pad)) for c in radiance.components)
+    comps = tuple(
+        replace(
+            c,
+            image_W_m2_sr=np.pad(c.image_W_m2_sr, pad),
+            unit_image=None if c.unit_image is None else np.pad(c.unit_image, pad),  # the lens works on this one
+        )
+        for c in radiance.components
+    )
     grid = replace(g, x0=x0, y0=y0, width=x1 - x0, height=y1 - y0)
     return SpectralRadiance(grid, comps, radiance.scenario, radiance.variant, radiance.from_cache)
 

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import colour
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import norm
+from scipy.stats import beta, norm
 
 
 # -- detection ---------------------------------------------------------------------------
@@ -49,6 +49,35 @@ def wilson_intervals(
     )
 
 
+def jeffreys_interval(
+    successes: ArrayLike, trials: ArrayLike, confidence: float = 0.95
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Posterior of a success probability per point: Beta(k + ½, n − k + ½), the posterior
+    under Jeffreys' prior Beta(½, ½), with its equal-tailed credible interval (Brown, Cai
+    & DasGupta 2001: low = 0 when k = 0, high = 1 when k = n).
+
+    Parameters
+    ----------
+    successes, trials : counts k and n per point (arrays or scalars, 0 ≤ k ≤ n).
+    confidence : probability inside the interval.
+
+    Returns
+    -------
+    (posterior mean, low, high) per point; (nan, 0, 1) where n = 0.
+    """
+    k = np.asarray(successes, dtype=np.float64)
+    n = np.asarray(trials, dtype=np.float64)
+    if np.any(k < 0) or np.any(k > n):
+        raise ValueError(f"successes: expected 0 <= successes <= trials, got {k.tolist()}/{n.tolist()}")
+    a, b = k + 0.5, n - k + 0.5
+    tail = (1.0 - confidence) / 2
+    empty = n == 0
+    mean = np.where(empty, np.nan, a / (a + b))
+    low = np.where((k == 0) | empty, 0.0, beta.ppf(tail, a, b))
+    high = np.where((k == n) | empty, 1.0, beta.ppf(1.0 - tail, a, b))
+    return mean, low, high
+
+
 # -- colour ------------------------------------------------------------------------------
 def rgb_chromaticity(rgb_linear: ArrayLike) -> NDArray[np.float64]:
     """Chromaticity (r, g) = (R, G) / (R + G + B) of linear RGB values, shape (..., 2)."""
@@ -60,16 +89,27 @@ def rgb_chromaticity(rgb_linear: ArrayLike) -> NDArray[np.float64]:
 
 
 def fisher_d_prime(a: ArrayLike, b: ArrayLike) -> float:
-    """Fisher's discriminability d′ of two 1-D samples: |μa − μb| / √((σa² + σb²)/2)."""
+    """Fisher's discriminability d′ of two 1-D samples: |μa − μb| / √((σa² + σb²)/2);
+    inf when both samples are constant (σ below 1e-12 of their magnitude) and differ, 0
+    when they are constant and equal."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     pooled = math.sqrt((a.var(ddof=1) + b.var(ddof=1)) / 2)
-    return abs(a.mean() - b.mean()) / pooled if pooled > 0 else math.inf
+    diff = abs(a.mean() - b.mean())
+    if pooled > 1e-12 * max(float(np.abs(a).max()), float(np.abs(b).max()), 1.0):
+        return diff / pooled
+    return math.inf if diff > 0 else 0.0
 
 
 def mahalanobis_separability(a: ArrayLike, b: ArrayLike) -> float:
     """Mahalanobis distance between the means of two samples (n, d) under their pooled
     covariance: √((μa − μb)ᵀ Σ⁻¹ (μa − μb)). Equal to d′ in 1-D; the Bayes error of two
-    equal-covariance Gaussians is Φ(−distance/2)."""
+    equal-covariance Gaussians is Φ(−distance/2) (:func:`bayes_error`).
+
+    A direction in which neither sample varies (a zero eigenvalue of Σ, below 1e-12 of the
+    largest or of 1) separates them perfectly if their means differ along it: the distance
+    is then inf, not the 0 a pseudo-inverse would give. nan with fewer than 2 points in a
+    sample.
+    """
     a, b = np.atleast_2d(np.asarray(a, float)), np.atleast_2d(np.asarray(b, float))
     if a.shape[0] < 2 or b.shape[0] < 2:
         return math.nan
@@ -77,8 +117,20 @@ def mahalanobis_separability(a: ArrayLike, b: ArrayLike) -> float:
     pooled = ((a.shape[0] - 1) * np.cov(a, rowvar=False) + (b.shape[0] - 1) * np.cov(b, rowvar=False)) / (
         a.shape[0] + b.shape[0] - 2
     )
-    pooled = np.atleast_2d(pooled)
-    return float(math.sqrt(diff @ np.linalg.pinv(pooled) @ diff))
+    values, vectors = np.linalg.eigh(np.atleast_2d(pooled))
+    along = vectors.T @ diff  # the mean difference in the covariance's eigenbasis
+    flat = values <= 1e-12 * max(float(values.max()), 1.0)
+    scale = max(float(np.abs(a).max()), float(np.abs(b).max()), 1.0)
+    if np.any(np.abs(along[flat]) > 1e-9 * scale):
+        return math.inf
+    return float(math.sqrt(np.sum(along[~flat] ** 2 / values[~flat])))
+
+
+def bayes_error(distance: float) -> float:
+    """Error rate of the best classifier of two equal-covariance Gaussian classes with equal
+    priors whose means are ``distance`` apart in Mahalanobis units: Φ(−distance/2)
+    (0 for an infinite distance)."""
+    return float(norm.cdf(-distance / 2)) if math.isfinite(distance) else 0.0
 
 
 def delta_e_2000(srgb_a: ArrayLike, srgb_b: ArrayLike) -> float:

@@ -1,22 +1,41 @@
-"""Self-contained HTML reports: text, tables and figures (PNG embedded as base64)."""
+"""Self-contained HTML reports: text, tables and figures (PNG embedded as base64).
+
+Figures are saved at :data:`FIGURE_DPI` and shown at their natural size up to the page's
+width, so a figure drawn :data:`PAGE_WIDTH_IN` inches wide or less is not scaled down and
+its text keeps the size it was drawn at (10 pt ≈ 14 px).
+"""
 
 from __future__ import annotations
 
 import base64
 import html
 import io
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from scenes.render_cache import atomic_write_bytes
 
+FIGURE_DPI = 100
+"""Resolution of embedded figures, pixels per inch."""
+PAGE_WIDTH_IN = 11.0
+"""Width of the page's text column at :data:`FIGURE_DPI`, inches (1100 px)."""
+
 _STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px; color: #222; line-height: 1.45; }
-h1 { font-size: 1.6em; } h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ddd; }
-table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0 1em; }
-th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; } th { background: #f3f3f3; }
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1100px; color: #222; line-height: 1.45;
+       padding: 0 1em; }
+h1 { font-size: 1.6em; margin-bottom: 0.3em; }
+h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ddd; }
+table { border-collapse: collapse; font-size: 0.9em; margin: 0.5em 0 1em; }
+th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; vertical-align: top; }
+th { background: #f3f3f3; }
 td:first-child, th:first-child { text-align: left; }
-figure { margin: 1em 0; } figcaption { font-size: 0.85em; color: #555; }
+table.keys td:nth-child(-n+3) { white-space: nowrap; }
+table.answers { font-size: 0.95em; width: 100%; }
+table.answers td, table.answers th { text-align: left; white-space: normal; }
+.lead { background: #f4f8fb; border-left: 4px solid #3b6ea5; padding: 0.6em 1em; margin: 0.8em 0; }
+.lead p { margin: 0.3em 0; }
+figure { margin: 1em 0; } figcaption { font-size: 0.9em; color: #555; }
 img { max-width: 100%; } .note { color: #555; font-size: 0.9em; }
 """
 
@@ -37,18 +56,57 @@ class Report:
         cls = ' class="note"' if note else ""
         self.parts.append(f"<p{cls}>{html.escape(text)}</p>")
 
-    def table(self, frame, caption: str | None = None, float_format: str = "{:.3g}") -> None:
-        """A pandas DataFrame as a table."""
+    def lead(self, paragraphs: list[str]) -> None:
+        """The report's answer, set apart at the top: paragraphs of plain text (escaped)."""
+        body = "".join(f"<p>{html.escape(p)}</p>" for p in paragraphs)
+        self.parts.append(f'<div class="lead">{body}</div>')
+
+    def html(self, markup: str) -> None:
+        """Markup built by the caller (it escapes any text it puts in)."""
+        self.parts.append(markup)
+
+    def table(
+        self,
+        frame,
+        caption: str | None = None,
+        float_format: str = "{:.3g}",
+        labels: Mapping[str, str] | None = None,
+        css_class: str | None = None,
+        formats: Mapping[str, str | Callable[[object], str]] | None = None,
+    ) -> None:
+        """A pandas DataFrame as a table.
+
+        Parameters
+        ----------
+        frame : the rows; every row is labelled by its own columns (no index is shown).
+        caption : bold line above the table.
+        float_format : format of float cells.
+        labels : column name → header text (units in the header); columns not named keep
+            their names.
+        css_class : class of the table element: "keys" keeps the first three columns (the
+            row's labels) on one line; None (the default) lets every cell wrap.
+        formats : column name → format of its cells (e.g. ``"{:g}"``, or a function of the
+            value), overriding ``float_format``; missing values show as "–".
+        """
         if caption:
             self.parts.append(f"<p><b>{html.escape(caption)}</b></p>")
-        self.parts.append(frame.to_html(index=False, float_format=float_format.format, na_rep="–", border=0))
+        shown = frame.copy()
+        for column, fmt in (formats or {}).items():
+            if column in shown:
+                render = fmt if callable(fmt) else fmt.format
+                shown[column] = [render(v) if v == v and v is not None else "–" for v in shown[column]]
+        shown = shown.rename(columns=dict(labels)) if labels else shown
+        classes = [css_class] if css_class else None
+        self.parts.append(
+            shown.to_html(index=False, float_format=float_format.format, na_rep="–", border=0, classes=classes)
+        )
 
     def figure(self, fig, caption: str) -> None:
-        """A matplotlib figure, embedded as PNG; the figure is closed."""
+        """A matplotlib figure, embedded as PNG at :data:`FIGURE_DPI`; the figure is closed."""
         import matplotlib.pyplot as plt
 
         buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        fig.savefig(buf, format="png", dpi=FIGURE_DPI, bbox_inches="tight")
         plt.close(fig)
         self.image_png(buf.getvalue(), caption)
 

@@ -26,7 +26,7 @@ RANGE_TOLERANCE = 0.10
 YAW_TOLERANCE_DEG = 5.0
 """Largest yaw error of a usable pose, degrees."""
 
-CAUSES = ("resolution / merging", "signal-to-noise", "colour", "saturation", "pose")
+CAUSES = ("resolution / merging", "signal-to-noise", "colour", "saturation", "false blobs", "pose")
 """Failure causes named by :func:`failure_cause`."""
 
 _DETECTION_COLUMNS = ("detected", "side_correct", "numbering_correct")
@@ -56,15 +56,22 @@ def failure_cause(row: dict) -> str:
     """Why a frame failed, from what the detector and the camera report.
 
     * colour: a side was found but the wrong one (or markers of a wrong colour);
+    * false blobs: the right side's colour, but not its five markers correctly numbered, with
+      more than five blobs of that colour to choose from (``side_blobs``): the tracker took
+      blobs of sensor noise or clutter for markers (a whole frame at high gain has hundreds);
     * saturation: markers not recognised and their cores mostly clipped (> 50 %);
     * resolution / merging: markers not recognised and closer than ~2 blob diameters, or
       the detector reports too few blobs (markers lost or merged,
       :attr:`pipeline.failures.Failure.TOO_FEW_BLOBS`);
     * signal-to-noise: markers not recognised, not clipped and well apart (too faint);
-    * pose: detected and numbered but range off by > 10 % or yaw by > 5°.
+    * pose: detected and numbered but range off by > 10 % or yaw by > 5° (or misnumbered
+      with no extra blob to blame).
     """
     if row.get("detected"):
-        return "pose" if row.get("side_correct") else "colour"
+        if not row.get("side_correct"):
+            return "colour"
+        extra = (row.get("side_blobs") or 0) > 5
+        return "false blobs" if extra and not row.get("numbering_correct") else "pose"
     if row.get("core_saturated_fraction_mean", 0.0) > 0.5:
         return "saturation"
     merged = row.get("failure") == Failure.TOO_FEW_BLOBS

@@ -10,8 +10,8 @@ from pathlib import Path
 import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
-from studies.engine.metrics import wilson_intervals
-from studies.engine.scoring import detection_successes
+from studies.engine.metrics import jeffreys_interval, wilson_intervals
+from studies.engine.scoring import detection_successes, failure_cause, pose_success
 
 CSV_MAX_ROWS = 1_000_000
 """Above this many rows only results.parquet is written (a CSV would take gigabytes)."""
@@ -48,3 +48,44 @@ def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
     table["detected"] = table["detected"].astype(int)
     table["p_detect"], table["p_low"], table["p_high"] = wilson_intervals(table["detected"], table["frames"])
     return table[[*keys, "frames", "detected", "p_detect", "p_low", "p_high"]]
+
+
+def pose_outcomes(frame, by: Sequence[str], x: str = "nominal_range_m"):
+    """Per group and x: frames, pose successes (:func:`studies.engine.scoring.pose_success`)
+    and their fraction, the Beta posterior of P(success) under Jeffreys' prior (mean and 95 % credible
+    interval, :func:`studies.engine.metrics.jeffreys_interval`) and the most common
+    failure cause with its count ("" where no frame failed).
+
+    Parameters
+    ----------
+    frame : results table (one row per frame and detector; cut it to one detector first).
+    by : grouping columns.
+    x : the column along which the outcomes are counted (nominal range, m, by default).
+
+    Returns
+    -------
+    DataFrame with columns ``[*by, x, "frames", "correct", "fraction", "p_mean", "p_low",
+    "p_high", "failed", "cause", "cause_frames"]``.
+    """
+    keys = [*by, x]
+    rows = []
+    for key, g in frame.groupby(keys, sort=True):
+        recs = g.to_dict("records")
+        ok = [pose_success(r) for r in recs]
+        causes = pd.Series([failure_cause(r) for r, good in zip(recs, ok, strict=True) if not good], dtype=object)
+        top = causes.value_counts()
+        rows.append(
+            {
+                **dict(zip(keys, key if isinstance(key, tuple) else (key,), strict=True)),
+                "frames": len(recs),
+                "correct": int(sum(ok)),
+                "failed": len(recs) - int(sum(ok)),
+                "cause": str(top.index[0]) if len(top) else "",
+                "cause_frames": int(top.iloc[0]) if len(top) else 0,
+            }
+        )
+    table = pd.DataFrame(rows, columns=[*keys, "frames", "correct", "failed", "cause", "cause_frames"])
+    table["fraction"] = table["correct"] / table["frames"]
+    table["p_mean"], table["p_low"], table["p_high"] = jeffreys_interval(table["correct"], table["frames"])
+    columns = ["frames", "correct", "fraction", "p_mean", "p_low", "p_high", "failed", "cause", "cause_frames"]
+    return table[[*keys, *columns]]

@@ -1,5 +1,12 @@
 """What a study sweeps: its options, the grid of nominal conditions, and frame tasks with pose jitter.
 
+Study frames are the camera's whole saved frame by default (:attr:`StudyOptions.frame`
+``"full"``): the detectors then see every blob the camera would give them, including the
+false blobs that sensor noise makes outside the rendered crop around the beacon (tens to
+hundreds at a webcam's maximum auto-exposure gain). ``"crop"`` keeps the older, cheaper
+path that captures and detects on the rendered crop only (optimistic about detection;
+:mod:`studies.experiments.crop_vs_full` measures the difference).
+
 Frames of one nominal condition differ by sensor-noise seed and by a small pose jitter
 (range ±0.5 %, yaw ±0.5°, camera height ±5 mm, drawn deterministically from the
 condition's geometry and the jitter index), so detection probabilities are not those of
@@ -24,6 +31,11 @@ from scenes.environment import ENVIRONMENT_NAMES
 from scenes.led import SIDE_COLOURS, led_for_side
 from scenes.view import camera_names
 
+FRAMES = ("full", "crop")
+"""What a study's frames are: ``full``, the camera's whole saved frame (the rendered crop inside
+a frame-sized background, sensor noise, ISP and JPEG on all of it), or ``crop``, the rendered
+crop alone (the path before frame version 4)."""
+
 RENDER = {"spp": 4, "oversampling": 2, "crop": "beacon", "near_field_spp": 1024}
 """Render settings of study frames (near-field marker renders cached per configuration)."""
 
@@ -43,11 +55,15 @@ class StudyOptions:
     jitter_poses: int = 2
     diffusers: tuple[tuple[bool, int, str], ...] = ((True, 1, "matched"),)
     render: dict = field(default_factory=lambda: dict(RENDER))
+    frame: str = "full"
+    """One of :data:`FRAMES`: the whole frame (default) or the rendered crop only."""
 
     def validate(self) -> None:
         """Fail fast, before any work, with one line naming the bad option."""
 
         _check_choices("cameras", self.cameras, camera_names())
+        if self.frame not in FRAMES:
+            raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {self.frame!r}")
         _check_choices("beacons", self.beacons, beacon_names())
         _check_choices("sides", self.sides, SIDE_COLOURS)
         _check_choices("environments", self.environments, ENVIRONMENT_NAMES)
@@ -148,7 +164,10 @@ def frame_tasks(
     """Frame tasks for every condition × seed (see module docstring).
 
     A condition holds Scenario fields; ``range_m``/``yaw_deg`` are nominal and get jittered.
+    With ``options.frame == "full"`` every task is a whole-frame task (``"full_frame": True``).
     """
+    if options.frame not in FRAMES:
+        raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {options.frame!r}")
     tasks = []
     for condition in conditions:
         for seed in range(options.seeds):
@@ -163,6 +182,8 @@ def frame_tasks(
                 "seed": seed,
                 "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]},
             }
+            if options.frame == "full":
+                task["full_frame"] = True
             if exposure:
                 task["exposure"] = exposure
             if trackers:

@@ -208,10 +208,17 @@ def _check_target(target: Any, at: str) -> None:
 
 
 def data_file_value(target: str) -> Any:
-    """The value a ``data.<file>.<key path>`` target has in ``scenes/data/<file>.toml`` (KeyError if absent)."""
-    _, file, *keys = target.split(".")
-    node = _scene_data(file)
-    for key in keys:
+    """The value a ``data.<file>.<key path>`` target has in ``scenes/data/<file>.toml`` (KeyError if absent).
+
+    ``<file>`` may go through folders of ``scenes/data``: ``data.beacons.v2.arm_length_mm`` is
+    ``arm_length_mm`` of ``scenes/data/beacons/v2.toml``.
+    """
+    _, *parts = target.split(".")
+    depth = 1
+    while depth < len(parts) and SCENE_DATA_DIR.joinpath(*parts[:depth]).is_dir():
+        depth += 1
+    node = _scene_data("/".join(parts[:depth]))
+    for key in parts[depth:]:
         node = node[key]
     return node
 
@@ -219,7 +226,7 @@ def data_file_value(target: str) -> Any:
 @lru_cache(maxsize=16)
 def _scene_data(file: str) -> dict:
     path = SCENE_DATA_DIR / f"{file}.toml"
-    if not file.isidentifier() or not path.is_file():
+    if not all(part.isidentifier() for part in file.split("/")) or not path.is_file():
         raise DataFileError(f"{path}: no such scene data file")
     return load_sourced(path)[0]
 

@@ -93,6 +93,7 @@ def default_options(quick: bool = False, seeds: int | None = None) -> StudyOptio
         environments=("dark",),
         currents_mA=(20.0,),
         seeds=seeds if seeds is not None else (1 if quick else 3),
+        frame="crop",  # the table is on crops; its full-frame check (FULL_FRAME_CONDITION) compares the two
         jitter_poses=1,
         diffusers=((True, 1, "matched"),),
         render=dict(RENDER),

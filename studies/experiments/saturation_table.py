@@ -114,6 +114,7 @@ def saturation_tasks(
         seeds=1,
         jitter_poses=1,
         render={"spp": spp, "oversampling": oversampling, "crop": "target", "seed": seed},
+        frame="crop",  # marker cores only: the rest of the frame does not change them
     )
     options.validate()
     return [{**t, "seed": seed} for t in frame_tasks(grid_conditions(options, ORDER), options)]

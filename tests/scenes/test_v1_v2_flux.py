@@ -42,7 +42,7 @@ def test_v1_side_markers_are_far_dimmer_than_v2s():
     np.testing.assert_allclose(v2, expected[1:] / expected[0], rtol=0.02)
     assert np.all(v2 > 0.9)
     # V1's in-plane LEDs point along their arms: the camera sees only stray light and the little
-    # that leaks through the default black housing's walls (scenes/data/beacons.toml, T = 0.01)
+    # that leaks through the default black housing's walls (scenes/data/beacons/*.toml, T = 0.01)
     assert np.all(v1 < 1e-3 * v2)
 
 

@@ -117,7 +117,7 @@ def test_apply_sets_scenario_and_camera_fields_and_leaves_the_task_alone(registr
     assert out["render"] == task["render"] and out["seed"] == 0
     Scenario(**out["scenario"])  # still a valid scenario
     assert "camera_overrides" not in apply(task, {"led_drive": 1.0}, registry)
-    with pytest.raises(ValueError, match=r"lit_face_diameter \(data\.beacons\.common\.lit_face_diameter_mm\)"):
+    with pytest.raises(ValueError, match=r"lit_face_diameter \(data\.beacons\.v2\.lit_face_diameter_mm\)"):
         apply(task, {"lit_face_diameter": 14.0}, registry)
     assert set(settable(registry)) == {n for n, u in registry.items() if not u.target.startswith("data.")}
     webcam = apply({"scenario": {"camera": "logitech-c270"}}, {"webcam_max_exposure": 0.1}, registry)
