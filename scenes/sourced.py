@@ -142,14 +142,12 @@ class Fields:
 
 
 def _number_words(minimum, maximum, positive, integer) -> str:
-    words = "an integer" if integer else "a number"
-    if positive:
-        words += " > 0"
+    bounds = ["> 0"] if positive else []
     if minimum is not None:
-        words += f" >= {minimum:g}"
+        bounds.append(f">= {minimum:g}")
     if maximum is not None:
-        words += f" <= {maximum:g}"
-    return words
+        bounds.append(f"<= {maximum:g}")
+    return ("an integer" if integer else "a number") + (" " + " and ".join(bounds) if bounds else "")
 
 
 def _in_bounds(value, minimum, maximum, positive, integer) -> bool:

@@ -115,7 +115,7 @@ def _edited(tmp_path, source: Path, old: str, new: str) -> Path:
             'ssf_csv = "../../x.csv"',
             r"sensor\.ssf_csv: expected one of .*'\.\./\.\./x\.csv'",
         ),
-        ("value = 93,", "value = 930,", r"isp\.jpeg_quality: expected an integer >= 1 <= 100, got 930$"),
+        ("value = 93,", "value = 930,", r"isp\.jpeg_quality: expected an integer >= 1 and <= 100, got 930$"),
         ("value = 1.2, source", "value = 1.2, sauce", r"optics\.f_number: needs exactly one of 'source' or 'assumed'"),
     ],
 )
