@@ -107,31 +107,58 @@ def _fit_to_image(frame: Intrinsics | Calibration, size: tuple[int, int], what: 
 def detect(
     image: Annotated[Path, typer.Argument(help="JPEG, PNG, TIFF or camera raw (e.g. Canon .CR2), any size.")],
     camera: Annotated[
-        str | None, typer.Option("--camera", help="Camera model (see 'beacon-sim cameras'): its intrinsics.")
+        str | None,
+        typer.Option("--camera", help="Camera model (see 'beacon-sim cameras'): its intrinsics.", show_default="none"),
     ] = None,
     calibration: Annotated[
-        Path | None, typer.Option("--calibration", help="Calibration JSON from 'beacon-sim calibrate': intrinsics.")
+        Path | None,
+        typer.Option(
+            "--calibration", help="Calibration JSON from 'beacon-sim calibrate': intrinsics.", show_default="none"
+        ),
     ] = None,
-    fx: Annotated[float | None, typer.Option("--fx", help="Focal length along u, px (explicit intrinsics).")] = None,
-    fy: Annotated[float | None, typer.Option("--fy", help="Focal length along v, px (default: --fx).")] = None,
-    cx: Annotated[float | None, typer.Option("--cx", help="Principal point u, px (default: image centre).")] = None,
-    cy: Annotated[float | None, typer.Option("--cy", help="Principal point v, px (default: image centre).")] = None,
+    fx: Annotated[
+        float | None, typer.Option("--fx", help="Focal length along u, px (explicit intrinsics).", show_default="none")
+    ] = None,
+    fy: Annotated[float | None, typer.Option("--fy", help="Focal length along v, px.", show_default="--fx")] = None,
+    cx: Annotated[
+        float | None, typer.Option("--cx", help="Principal point u, px.", show_default="image centre")
+    ] = None,
+    cy: Annotated[
+        float | None, typer.Option("--cy", help="Principal point v, px.", show_default="image centre")
+    ] = None,
     dist: Annotated[
-        str | None, typer.Option("--dist", help="Lens distortion k1,k2,p1,p2[,k3] (OpenCV) with --camera or --fx.")
+        str | None,
+        typer.Option(
+            "--dist", help="Lens distortion k1,k2,p1,p2[,k3] (OpenCV) with --camera or --fx.", show_default="none"
+        ),
     ] = None,
     resize: Annotated[
         float | None,
-        typer.Option("--resize", help="Tracker's processing scale in (0, 1], e.g. 0.5 as the study did for the T6."),
+        typer.Option(
+            "--resize",
+            help="Tracker's processing scale in (0, 1], e.g. 0.5 as the study did for the T6.",
+            show_default="the tracker's own",
+        ),
     ] = None,
     tracker: Annotated[str, typer.Option("--tracker", help="thesis (the study's) or best.")] = "best",
     estimator: Annotated[str, typer.Option("--estimator", help="thesis (the study's) or best.")] = "best",
     beacon: Annotated[str, typer.Option("--beacon", help="Beacon design: v1 or v2.")] = "v2",
     alpha: Annotated[float, typer.Option("--alpha", help="Undistortion alpha (0: valid pixels, 1: all).")] = 0.0,
     crop_origin: Annotated[
-        str | None, typer.Option("--crop-origin", help="U,V of the image's top-left pixel in the full frame (crops).")
+        str | None,
+        typer.Option(
+            "--crop-origin",
+            help="U,V of the image's top-left pixel in the full frame (crops).",
+            show_default="the whole frame",
+        ),
     ] = None,
     ring_camera: Annotated[
-        int | None, typer.Option("--ring-camera", help="Camera number on the 6-camera ring: report the robot's pose.")
+        int | None,
+        typer.Option(
+            "--ring-camera",
+            help="Camera number on the 6-camera ring: report the robot's pose.",
+            show_default="no ring pose",
+        ),
     ] = None,
     json_out: opt.Json = False,
 ) -> None:
@@ -278,7 +305,9 @@ def calibrate(
     resize: Annotated[
         float | None,
         typer.Option(
-            "--resize", help="Find the board on a copy resized by this scale in (0, 1] (faster on large photos)."
+            "--resize",
+            help="Find the board on a copy resized by this scale in (0, 1] (faster on large photos).",
+            show_default="full size",
         ),
     ] = None,
 ) -> None:
