@@ -316,17 +316,11 @@ def test_h_and_help_on_every_command(work):
     assert invoke(["study", "--help"])[0] == invoke(["--help"])[0] == 0
 
 
-OWNED_ELSEWHERE: set[str] = set()
-"""Commands whose options this file does not check (none)."""
-
-
 def test_help_shows_every_default():
     """Options with a default show it; where the default is None the help says in words what
     happens (``show_default`` text)."""
     missing = []
     for name, command in _click_commands().items():
-        if name in OWNED_ELSEWHERE:
-            continue
         for param in command.params:
             if getattr(param, "param_type_name", "") != "option" or param.required or param.name == "help":
                 continue
