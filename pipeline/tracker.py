@@ -17,7 +17,12 @@ float as linear):
    (:func:`pipeline.markers.cross_candidates`), screened with cheap image-plane tests and
    fitted by PnP with the camera's intrinsics; the subset with the smallest reprojection
    RMS below ``max(fit_rms_px, fit_rms_rel·size)`` is the target. Extra blobs
-   (reflections, other sides, lamps) are thus ignored.
+   (reflections, other sides, lamps) are thus ignored. The search is a branch and bound:
+   a lower bound on each candidate's RMS from its image-space shape alone
+   (:func:`rms_lower_bounds`) orders the fits and skips every candidate that cannot beat
+   the best fit found (or, for a colour that fails, cannot be accepted), so the answer is
+   the full search's with a few PnP fits instead of hundreds; fits are shared by the
+   searches of one frame.
 5. If no colour fits, every blob is tried regardless of colour (the side is then the
    majority colour of the five, or unknown); otherwise the reason says which colour came
    closest and whether markers look merged (a blob much larger than the others) or lost.
@@ -26,6 +31,7 @@ float as linear):
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
@@ -129,6 +135,10 @@ class TrackerSettings:
         max(fit_rms_px, fit_rms_rel × the target's image size).
     linearise_8bit
         Decode 8-bit images as sRGB before weighting.
+    prune
+        Skip the PnP fit of 5-subsets whose image-space shape proves they cannot beat the
+        best fit found so far (:func:`best_five`); the answer is the same. False fits every
+        candidate (the reference search).
     """
 
     colour_model: ColourModel | None = None
@@ -142,6 +152,7 @@ class TrackerSettings:
     fit_rms_px: float = 1.0
     fit_rms_rel: float = 0.02
     linearise_8bit: bool = True
+    prune: bool = True
 
     def model(self) -> ColourModel:
         """The colour model in use."""
@@ -153,6 +164,7 @@ class _Fit:
     rms_px: float
     uv: NDArray[np.float64]
     blobs: list[Blob] = field(default_factory=list)
+    settled: bool = True  # False: a failed search stopped early, rms_px is only an upper bound
 
 
 def _linear_lut(dtype, s: TrackerSettings) -> NDArray[np.float32] | None:
@@ -264,27 +276,272 @@ def _fit(uv: NDArray[np.float64], design: BeaconDesign, k: NDArray[np.float64]) 
     return float(np.sqrt(np.mean((proj.reshape(5, 2) - uv) ** 2)))
 
 
-def best_five(blobs: list[Blob], design: BeaconDesign, intrinsics: Intrinsics, s: TrackerSettings) -> _Fit | None:
-    """The 5-subset of ``blobs`` (brightest ``max_candidates``) that best fits the target, numbered."""
+def cross_dimensions(design: BeaconDesign) -> tuple[float, float] | None:
+    """Arm length a and out-of-plane offset d of a cross-shaped design, m; None for another shape.
+
+    A cross: markers 2-3 and 4-5 are perpendicular diagonals of equal length 2a with a
+    common midpoint C, and marker 1 lies at distance d from C on their plane's normal
+    (V1, V2 and every design :mod:`scenes.beacon` builds). :func:`rms_lower_bounds`
+    holds only for such a design.
+    """
+    p = design.marker_positions_m()
+    centre = 0.5 * (p[1] + p[2])
+    u, w, n = 0.5 * (p[2] - p[1]), 0.5 * (p[4] - p[3]), p[0] - centre
+    arm, out = float(np.linalg.norm(u)), float(np.linalg.norm(n))
+    tol = 1e-9 * max(arm, out, 1e-3)
+    is_cross = (
+        arm > 0
+        and out > 0
+        and np.allclose(0.5 * (p[3] + p[4]), centre, rtol=0, atol=tol)
+        and abs(np.linalg.norm(w) - arm) <= tol
+        and max(abs(u @ w), abs(u @ n), abs(w @ n)) <= tol * max(arm, out)
+    )
+    return (arm, out) if is_cross else None
+
+
+_BOUND_SHAVE = 1e-6
+"""Relative amount taken off every lower bound, so rounding cannot lift one above the exact value."""
+
+
+def rms_lower_bounds(
+    numbered: NDArray[np.float64],
+    k: NDArray[np.float64],
+    arm_m: float,
+    out_m: float,
+    limit: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Lower bounds on the reprojection RMS that any pose of a cross target can reach, px.
+
+    For each numbered five (markers 1..5) the bound is at most the RMS (over the ten
+    coordinates, as :func:`_fit` measures it) between the five image points and the
+    pinhole projection of the target (:func:`cross_dimensions`: arm ``a``, offset ``d``)
+    under *any* rigid pose that puts all five markers in front of the camera, so also at
+    most the RMS the PnP fit reaches (its pose has marker 1 in front; one with another
+    marker behind the camera, i.e. marker 1 within 8 cm of the camera plane, would project
+    that marker mirrored and far out of any frame). It is computed from the image-space
+    shape alone, with no limit on range, yaw, pitch, roll or where the target is in the frame.
+
+    Geometry (normalised coordinates x = K⁻¹·(u, v, 1), centre C of the arms at depth Z,
+    ε = a/Z, μ = d/a, arm directions u, w and normal n = u × w in camera axes, c₀ the image
+    of C, J = [I | −c₀]). Projecting C + v gives c₀ + (J·v/Z)/(1 + v_z/Z), hence exactly
+
+    * half-diagonals A = (x₃ − x₂)/2 = ε·J·u/(1 − ε²u_z²), B = (x₅ − x₄)/2 likewise with w;
+    * diagonal midpoints (x₂ + x₃)/2 = c₀ − ε·u_z·A, (x₄ + x₅)/2 = c₀ − ε·w_z·B;
+    * marker 1: x₁ − c₀ = μ·ε·J·n/(1 + μ·ε·n_z).
+
+    Since |J·u|² + |J·w|² ≥ 1 (u, w, n orthonormal; J·Jᵀ = I + c₀c₀ᵀ), ε ≤ H = (|A|² + |B|²)^½.
+    Two statistics follow:
+
+    1. *Parallelogram*: the diagonals' midpoints differ by at most ε·H ≤ H² (u_z² + w_z² ≤ 1).
+       A square seen from afar is a parallelogram; perspective bends it by at most this.
+    2. *Isotropy*: with E = (x₁ − m)/μ (m the mean of markers 2-5), the 2×3 matrix
+       V = [A, B, E] equals ε·J·[u, w, n] up to perspective terms of order ε, and
+       ε²·J·[u, w, n]·[u, w, n]ᵀ·Jᵀ = ε²(I + c₀c₀ᵀ): whitened by P = (I + mmᵀ)^-½, V·Vᵀ
+       is a multiple of the identity. Its eigenvalue gap is bounded by Weyl's inequality
+       from the perspective terms (each bounded through ε ≤ H) and the whitening error.
+
+    Moving the five points by δ (Frobenius norm, normalised units) changes the midpoint
+    difference by at most δ, H by at most δ/√2, A, B and E by at most max(1/√2, √1.25/μ)·δ
+    and m by δ/2. Each statistic's bound is thus an increasing function of δ; the smallest
+    δ that reaches the observed statistic bounds the distance of the points from every
+    exact projection, and δ·min(f_x, f_y)/√10 the RMS in pixels. The larger of the two
+    is returned (0 where the shape is consistent with the target).
+
+    Parameters
+    ----------
+    numbered
+        (N, 5, 2) image points of markers 1..5, full-frame px.
+    k
+        3×3 camera matrix (no skew), px.
+    arm_m, out_m
+        Arm length a and out-of-plane offset d of the target, m.
+    limit
+        Optional (N,) px: the isotropy bound is computed only where the parallelogram bound
+        is at most ``limit`` (elsewhere the parallelogram bound alone is returned, a valid but
+        weaker bound); saves time where the caller discards larger bounds anyway.
+
+    Returns
+    -------
+    NDArray
+        (N,) lower bounds, px (0 where the shape fits the target).
+    """
+    pts = np.asarray(numbered, dtype=np.float64)
+    x = (pts - k[[0, 1], [2, 2]]) / k[[0, 1], [0, 1]]
+    to_px = min(k[0, 0], k[1, 1]) / np.sqrt(10.0) * (1.0 - _BOUND_SHAVE)
+    half_a, half_b = 0.5 * (x[:, 2] - x[:, 1]), 0.5 * (x[:, 4] - x[:, 3])
+    mid_a, mid_b = 0.5 * (x[:, 1] + x[:, 2]), 0.5 * (x[:, 3] + x[:, 4])
+    h = np.sqrt((half_a**2).sum(axis=1) + (half_b**2).sum(axis=1))
+    # 1. parallelogram: |mid_a − mid_b| ≤ (H + δ/√2)² + δ; the root of δ²/2 + (√2·H + 1)·δ + H² − gap = 0
+    gap = np.linalg.norm(mid_a - mid_b, axis=1)
+    b, c = np.sqrt(2.0) * h + 1.0, h * h - gap
+    with np.errstate(invalid="ignore", divide="ignore"):
+        delta = np.where(c < 0, -2.0 * c / (b + np.sqrt(b * b - 2.0 * c)), 0.0)
+    bound = np.nan_to_num(delta, nan=0.0, posinf=0.0) * to_px
+    # 2. isotropy, where still needed
+    need = np.isfinite(bound) if limit is None else bound <= np.asarray(limit)
+    if need.any():
+        bound[need] = np.maximum(bound[need], _isotropy_delta(x[need], out_m / arm_m) * to_px)
+    return bound
+
+
+def _isotropy_delta(x: NDArray[np.float64], mu: float, steps: int = 24) -> NDArray[np.float64]:
+    """Smallest perturbation δ (normalised, Frobenius) that can explain the isotropy gap, from below."""
+    half_a, half_b = 0.5 * (x[:, 2] - x[:, 1]), 0.5 * (x[:, 4] - x[:, 3])
+    m = x[:, 1:].mean(axis=1)
+    e = (x[:, 0] - m) / mu
+    v = np.stack([half_a, half_b, e], axis=2)  # (N, 2, 3)
+    s = v @ v.transpose(0, 2, 1)
+    m2 = (m**2).sum(axis=1)
+    m_unit = m / np.sqrt(np.where(m2 > 0, m2, 1.0))[:, None]
+    shrink = 1.0 / np.sqrt(1.0 + m2) - 1.0
+    p = np.eye(2) + shrink[:, None, None] * m_unit[:, :, None] * m_unit[:, None, :]  # (I + mmᵀ)^-½
+    wt = p @ s @ p
+    gap = np.hypot(wt[:, 0, 0] - wt[:, 1, 1], 2.0 * wt[:, 0, 1])
+    h0 = np.sqrt((half_a**2).sum(axis=1) + (half_b**2).sum(axis=1))
+    e0, m0 = np.linalg.norm(e, axis=1), np.sqrt(m2)
+    lip = max(1.0 / np.sqrt(2.0), np.sqrt(1.25) / mu)
+
+    def reach(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        eps = h0 + d / np.sqrt(2.0)  # ≥ H of the exact projection ≥ ε
+        e_max = e0 + np.sqrt(1.25) * d / mu
+        dc = 0.5 * eps * eps + 0.5 * d  # ≥ |c₀ − m|
+        c0 = m0 + dc
+        dv = eps * (1.5 * eps * eps + mu * e_max + eps / (2.0 * mu)) + lip * d  # ≥ ‖V − ε·J·[u, w, n]‖
+        return 2.0 * eps * eps * dc * (c0 + m0) + 2.0 * (2.0 * eps * np.sqrt(1.0 + c0 * c0) * dv + dv * dv)
+
+    lo, hi = np.zeros(len(x)), np.ones(len(x))
+    for _ in range(steps):  # bisection; lo stays below the root
+        mid = 0.5 * (lo + hi)
+        reached = gap <= reach(mid)
+        hi, lo = np.where(reached, mid, hi), np.where(reached, lo, mid)
+    return np.where(gap <= reach(np.zeros(len(x))), 0.0, np.nan_to_num(lo, nan=0.0))
+
+
+def best_five(
+    blobs: list[Blob],
+    design: BeaconDesign,
+    intrinsics: Intrinsics,
+    s: TrackerSettings,
+    memo: dict | None = None,
+    settle: bool = True,
+) -> _Fit | None:
+    """The 5-subset of ``blobs`` (brightest ``max_candidates``) that best fits the target, numbered.
+
+    Every numbering of every 5-subset that passes the cross and image-plane screens is a
+    candidate; the answer is the first (in subset order) with the least PnP reprojection
+    RMS, marked as a fit (``blobs`` set) when that RMS is within the acceptance threshold.
+    With ``s.prune`` the answer is the same, found with fewer PnP fits: candidates are
+    visited in order of :func:`rms_lower_bounds`, and one whose bound exceeds the least
+    RMS found so far is never fitted (it cannot be the answer); fits are looked up in
+    ``memo`` first.
+
+    Parameters
+    ----------
+    blobs, design, intrinsics, s
+        Blobs to search, target design, full-frame intrinsics and tracker settings.
+    memo
+        Optional cache of fits (numbered points → RMS) shared by the searches of one frame.
+    settle
+        False lets a failed search stop early: its candidates whose bound exceeds their own
+        acceptance threshold are not fitted, so an accepted answer is still exactly the
+        full search's, and so is the absence of one, but a failed result's ``rms_px`` is
+        then only an upper bound (``settled`` False; search again with ``settle`` to get it).
+    """
     cands = sorted(blobs, key=lambda b: -b.flux)[: s.max_candidates]
     if len(cands) < 5:
         return None
     k = intrinsics.matrix()
     uv = np.array([[c.u, c.v] for c in cands])
     subsets = np.array(list(itertools.combinations(range(len(cands)), 5)))
-    best = None
-    for which, idx in zip(*cross_candidates_many(uv[subsets]), strict=True):
-        subset = subsets[which]
-        numbered = uv[subset][idx]
-        if not _plausible(numbered):
-            continue
-        rms = _fit(numbered, design, k)
-        if best is None or rms < best.rms_px:
-            best = _Fit(rms, numbered, [cands[subset[i]] for i in idx])
-    if best is None:
-        return None
+    which, idx = cross_candidates_many(uv[subsets])
+    chosen = subsets[which[:, None], idx] if len(which) else np.zeros((0, 5), dtype=np.int64)
+    numbered = uv[chosen]  # (N, 5, 2), markers 1..5 of every candidate, as the full search numbers them
+    dims = cross_dimensions(design) if s.prune else None
+    found = None if dims is None else _pruned_search(numbered, dims, design, k, s, memo, settle)
+    if found is None:  # the full search
+        best_i, best_rms = None, float("inf")
+        for i in range(len(numbered)):
+            if not _plausible(numbered[i]):
+                continue
+            rms = _fit(numbered[i], design, k)
+            if best_i is None or rms < best_rms:
+                best_i, best_rms = i, rms
+        found = best_i, best_rms, True
+    best_i, best_rms, settled = found
+    if best_i is None:
+        return None if settled else _Fit(best_rms, np.full((5, 2), np.nan), [], settled=False)
+    best = _Fit(best_rms, numbered[best_i], [cands[i] for i in chosen[best_i]])
     size = float(np.ptp(best.uv, axis=0).max())
-    return best if best.rms_px <= max(s.fit_rms_px, s.fit_rms_rel * size) else _Fit(best.rms_px, best.uv, [])
+    if best.rms_px <= max(s.fit_rms_px, s.fit_rms_rel * size):
+        return best
+    return _Fit(best.rms_px, best.uv, [], settled=settled)
+
+
+def _pruned_search(
+    numbered: NDArray[np.float64],
+    dims: tuple[float, float],
+    design: BeaconDesign,
+    k: NDArray[np.float64],
+    s: TrackerSettings,
+    memo: dict | None,
+    settle: bool,
+) -> tuple[int | None, float, bool] | None:
+    """Branch and bound over the candidates: (index of the answer or None, its RMS, settled).
+
+    None when a fit is not a number (the full search's order then decides; it never
+    happens with finite points). Exactness: every candidate i left unfitted has a lower
+    bound L_i > the returned RMS, so its RMS is larger and it can neither be the answer nor
+    tie with it; among the fitted ones the least RMS, then the lowest index, wins, as in
+    the full search's sequential strict comparison. Without ``settle``, candidates with
+    L_i above their own acceptance threshold are deferred: the full search's answer, if
+    accepted, has L ≤ RMS ≤ its threshold, so it is never deferred and is found in the
+    first pass; the deferred ones are then fitted as needed (branch and bound again) only
+    when the first pass's answer is accepted, so that it is also the least RMS of all.
+    """
+    n = len(numbered)
+    if n == 0:
+        return None, float("inf"), True
+    size = np.ptp(numbered, axis=1).max(axis=1)
+    limit = np.maximum(s.fit_rms_px, s.fit_rms_rel * size)  # each candidate's acceptance threshold, px
+    bounds = rms_lower_bounds(numbered, k, *dims, limit=None if settle else limit)
+    order = np.argsort(bounds, kind="stable")
+    key0 = k.tobytes() + design.marker_positions_m().tobytes()
+    memo = {} if memo is None else memo
+    best_i, best_rms = None, float("inf")
+    deferred = []
+
+    def visit(i: int) -> bool:
+        nonlocal best_i, best_rms
+        if not _plausible(numbered[i]):
+            return True
+        key = key0 + numbered[i].tobytes()
+        rms = memo.get(key)
+        if rms is None:
+            rms = memo[key] = _fit(numbered[i], design, k)
+        if np.isnan(rms):
+            return False
+        if best_i is None or rms < best_rms or (rms == best_rms and i < best_i):
+            best_i, best_rms = i, rms
+        return True
+
+    for i in order.tolist():
+        if bounds[i] > best_rms:
+            break  # so are all later ones
+        if not settle and bounds[i] > limit[i]:
+            deferred.append(i)  # cannot be accepted; needed only to settle
+            continue
+        if not visit(i):
+            return None
+    accepted = best_i is not None and best_rms <= limit[best_i]
+    if deferred and accepted:  # an accepted answer must also beat the deferred candidates
+        for i in deferred:
+            if bounds[i] > best_rms:
+                break
+            if not visit(i):
+                return None
+        deferred = []
+    settled = not any(bounds[i] <= best_rms for i in deferred)
+    return best_i, best_rms, settled
 
 
 def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None, crop_origin_px=(0, 0)) -> TrackResult:
@@ -311,10 +568,11 @@ def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None
         return TrackResult(None, None, reason or "no bright blobs", failure=Failure.NO_BLOBS)
     design = beacon_design(s.beacon)
     by_colour = {c: [b for b in blobs if b.colour == c] for c in SIDE_COLOURS}
+    memo: dict = {}  # PnP fits of this frame, shared by its searches
     fits = {}
     for colour in SIDE_COLOURS:
         if len(by_colour[colour]) >= 5:
-            fit = best_five(by_colour[colour], design, intrinsics, s)
+            fit = best_five(by_colour[colour], design, intrinsics, s, memo, settle=False)
             if fit is not None:
                 fits[colour] = fit
     good = {c: f for c, f in fits.items() if f.blobs}
@@ -323,7 +581,7 @@ def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None
         fit = good[colour]
         notes = [f"{len(by_colour[colour]) - 5} extra {colour} blob(s) ignored"] if len(by_colour[colour]) > 5 else []
         return TrackResult(colour, fit.uv, None, blobs, notes)
-    fit = best_five(blobs, design, intrinsics, s) if len(blobs) >= 5 else None
+    fit = best_five(blobs, design, intrinsics, s, memo, settle=False) if len(blobs) >= 5 else None
     if fit is not None and fit.blobs:
         colours = [b.colour for b in fit.blobs]
         top = max(SIDE_COLOURS, key=colours.count)
@@ -332,11 +590,16 @@ def track(image, intrinsics: Intrinsics, settings: TrackerSettings | None = None
             return TrackResult(top, fit.uv, None, blobs, [f"mixed marker colours ({counts}); side by majority"])
         reason = f"target found but its colour is unclear ({counts})"
         return TrackResult(None, fit.uv, reason, blobs, failure=Failure.COLOUR_UNCLEAR)
-    failure, reason = _why_not(by_colour, fits, blobs)
+    failure, reason = _why_not(by_colour, fits, blobs, lambda c: best_five(by_colour[c], design, intrinsics, s, memo))
     return TrackResult(None, None, reason, blobs, failure=failure)
 
 
-def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: list[Blob]) -> tuple[Failure, str]:
+def _why_not(
+    by_colour: dict[str, list[Blob]],
+    fits: dict[str, _Fit],
+    blobs: list[Blob],
+    settle: Callable[[str], _Fit | None] | None = None,
+) -> tuple[Failure, str]:
     colour = max(SIDE_COLOURS, key=lambda c: (len(by_colour[c]), -SIDE_COLOURS.index(c)))
     found = by_colour[colour]
     n = len(found)
@@ -350,7 +613,10 @@ def _why_not(by_colour: dict[str, list[Blob]], fits: dict[str, _Fit], blobs: lis
             b = big[0]
             what += f"; blob at ({b.u:.0f}, {b.v:.0f}) is {b.area_px / np.median(areas):.1f}× the median area: merged"
         return Failure.TOO_FEW_BLOBS, what
-    rms = fits[colour].rms_px if colour in fits else float("inf")
+    fit = fits.get(colour)
+    if fit is not None and not fit.settled and settle is not None:
+        fit = settle(colour)  # the least RMS of all candidates, as the reason reports it
+    rms = fit.rms_px if fit is not None else float("inf")
     return (
         Failure.NO_FIT,
         f"{colour}: {n} blobs but no 5 of them fit the target geometry (best reprojection RMS {rms:.2g} px)",

@@ -40,6 +40,7 @@ from studies.experiments import crop_vs_full as cvf
 from studies.experiments import diffuser_mosaic as mosaic
 from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
+from studies.experiments import tracker_pruning as pruning
 
 MAX_SAMPLES = 2**16
 """Most points an unknowns search accepts: each is scored on every close-range condition, side
@@ -327,6 +328,34 @@ def crop_vs_full(
     )
 
 
+def tracker_pruning(
+    out: opt.Out,
+    max_frames: Annotated[
+        int | None, typer.Option("--max-frames", help="Use at most this many frames.", show_default="all (~300)")
+    ] = None,
+    repeats: Annotated[int, typer.Option("--repeats", help="Tracker runs per frame and search (fastest counts).")] = 3,
+) -> None:
+    """The best tracker's pruned 5-subset search against the full search on the quick grids' frames.
+
+    Checks the answers are identical and measures the saving; writes tracker_pruning.json.
+    """
+    if max_frames is not None and max_frames < 1:
+        raise UsageError(f"max-frames: expected an integer >= 1, got {max_frames}")
+    if not 1 <= repeats <= 100:
+        raise UsageError(f"repeats: expected an integer 1-100, got {repeats}")
+    check_render_cache()
+    prepare_out_dir(out)
+    with console.status("comparing the pruned and the full search ..."):
+        result = pruning.run(max_frames=max_frames, repeats=repeats)
+    atomic_write_bytes(out / "tracker_pruning.json", json.dumps(result, indent=1, allow_nan=True).encode())
+    console.print(
+        f"{result['identical']} of {result['frames']} frames identical; tracker median "
+        f"{result['time_full_ms']['median']:.1f} -> {result['time_pruned_ms']['median']:.1f} ms "
+        f"({result['speedup_median']:.1f}x); {100 * result['pruned_fraction']:.1f} % of PnP fits skipped; "
+        f"wrote {out / 'tracker_pruning.json'}"
+    )
+
+
 COMMANDS = {
     "e2e-detection": e2e_detection,
     "saturation-table": saturation_table,
@@ -335,4 +364,5 @@ COMMANDS = {
     "unknowns-search": unknowns_search,
     "colour-reach": colour_reach,
     "crop-vs-full": crop_vs_full,
+    "tracker-pruning": tracker_pruning,
 }

@@ -52,6 +52,8 @@ WORK_FUNCTIONS = {
     "studies.catalog.range_limit": ["run"],
     "studies.catalog.replication": ["run"],
     "studies.experiments.e2e_detection": ["run"],
+    "studies.experiments.crop_vs_full": ["run"],
+    "studies.experiments.tracker_pruning": ["run"],
     "studies.experiments.saturation_table": ["saturation_rows"],
     "studies.experiments.diffuser_mosaic": ["diffuser_mosaic"],
     "studies.experiments.two_stage_check": ["compare"],
