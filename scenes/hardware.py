@@ -17,6 +17,7 @@ import hashlib
 import os
 import re
 import tomllib
+from functools import cache, lru_cache
 from pathlib import Path
 
 ENV_VAR = "BEACON_SIM_HARDWARE_FILES"
@@ -39,6 +40,16 @@ def _check_kind(kind: str) -> None:
 
 def _file_name(path: Path) -> str:
     """The ``name`` field of a hardware file (one-line errors naming the file)."""
+    try:
+        mtime_ns = path.stat().st_mtime_ns
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return _name_of(path, mtime_ns)
+
+
+@lru_cache(maxsize=64)
+def _name_of(path: Path, _mtime_ns: int) -> str:
+    """:func:`_file_name` of one version of the file (cached: names are looked up per frame)."""
     try:
         values = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -63,7 +74,9 @@ def _user_files(kind: str) -> dict[str, Path]:
     return out
 
 
+@cache
 def _package_files(kind: str) -> dict[str, Path]:
+    """The package's own files of ``kind`` by name (fixed while the program runs)."""
     return {p.stem: p for p in sorted(PACKAGE_DIRS[kind].glob("*.toml"))}
 
 

@@ -290,10 +290,7 @@ def unknowns_search(
 
 def crop_vs_full(
     out: opt.Out,
-    cameras: Annotated[
-        str | None,
-        typer.Option("--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all"),
-    ] = None,
+    cameras: opt.Cameras = None,
     ranges_m: Annotated[
         str | None, typer.Option("--ranges-m", help="Comma-separated ranges, m.", show_default="2,5")
     ] = None,
