@@ -78,20 +78,30 @@ def background_electrons_per_s(background: SpectralRadiance, camera: Camera, f_n
     return out * relative_illumination(camera, f_number, u[None, :], v[:, None])[..., None]
 
 
-def full_frame(
+def full_frame_mosaic(
     crop_e: NDArray[np.float64], x0: int, y0: int, camera: Camera, background_e: NDArray[np.float64] | None
 ) -> NDArray[np.float32]:
-    """Full-frame mean electrons (rows, cols, 3): background upsampled (nearest), crop pasted in."""
-    g = camera.geometry
-    if background_e is None:
-        frame = np.zeros((g.height_px, g.width_px, 3), dtype=np.float32)
-    else:
+    """Full-frame mean electrons behind each pixel's own colour filter (rows, cols), e⁻.
+
+    The background (rows, cols, 3 on its low-resolution grid) upsampled by nearest
+    neighbour, the crop (rows, cols, 3 at ``x0``, ``y0``) pasted in, each pixel's channel
+    picked by the CFA: :func:`camera_models.sensor.mosaic` of the full three-channel frame,
+    without building it.
+    """
+    g, cfa = camera.geometry, camera.sensor.cfa
+    out = np.zeros((g.height_px, g.width_px), dtype=np.float32)
+    if background_e is not None:
         scale = math.ceil(g.width_px / background_e.shape[1])
-        frame = np.repeat(np.repeat(background_e.astype(np.float32), scale, axis=0), scale, axis=1)
-        frame = np.ascontiguousarray(frame[: g.height_px, : g.width_px])
+        bg = background_e.astype(np.float32)
+        ch = cfa_channels(cfa, 0, 0, 2, 2)
+        for dy in range(2):
+            for dx in range(2):
+                rows = np.arange(dy, g.height_px, 2) // scale
+                cols = np.arange(dx, g.width_px, 2) // scale
+                out[dy::2, dx::2] = bg[..., ch[dy, dx]][np.ix_(rows, cols)]
     h, w = crop_e.shape[:2]
-    frame[y0 : y0 + h, x0 : x0 + w] = crop_e
-    return frame
+    out[y0 : y0 + h, x0 : x0 + w] = mosaic(crop_e, cfa, x0, y0)
+    return out
 
 
 def frame_meter(
@@ -194,12 +204,11 @@ def capture(
             exposure = manual_exposure(camera)
     t = exposure.exposure_s
     if full:
-        mean_rgb = full_frame(opt.electrons_rgb * t, opt.x0, opt.y0, camera, None if bg is None else bg * t)
+        mean = full_frame_mosaic(opt.electrons_rgb * t, opt.x0, opt.y0, camera, None if bg is None else bg * t)
         x0 = y0 = 0
     else:
-        mean_rgb, x0, y0 = opt.electrons_rgb * t, opt.x0, opt.y0
-    mean = mosaic(mean_rgb, camera.sensor.cfa, x0, y0)
-    del mean_rgb
+        x0, y0 = opt.x0, opt.y0
+        mean = mosaic(opt.electrons_rgb * t, camera.sensor.cfa, x0, y0)
     settings = SensorSettings(t, exposure.analog_gain)
     raw = expose(mean, camera.sensor, settings, seed, x0, y0) if noise else noiseless_raw(mean, camera, settings)
     clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)

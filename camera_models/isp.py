@@ -65,14 +65,27 @@ _PATTERN_NAMES = {(0, 1, 1, 2): "RGGB", (2, 1, 1, 0): "BGGR", (1, 0, 2, 1): "GRB
 
 def demosaic(linear: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:
     """Bilinear demosaic of a normalised mosaic with OpenCV; returns (rows, columns, 3) RGB in [0, 1]."""
-    tile = tuple(int(c) for c in cfa_channels(cfa, x0, y0, 2, 2).ravel())
-    code = getattr(cv2, f"COLOR_Bayer{_PATTERN_NAMES[tile]}2BGR")
     as16 = np.rint(np.clip(linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
-    bgr = cv2.cvtColor(as16, code)
-    del as16
-    rgb = bgr[..., ::-1].astype(np.float32)
+    rgb = _demosaic_bgr16(as16, cfa, x0, y0)[..., ::-1].astype(np.float32)
     rgb *= np.float32(1.0 / 65535.0)
     return rgb
+
+
+def _demosaic_bgr16(as16: NDArray[np.uint16], cfa: str, x0: int, y0: int) -> NDArray[np.uint16]:
+    """OpenCV's bilinear demosaic of a 16-bit mosaic (full scale 65535) to BGR."""
+    tile = tuple(int(c) for c in cfa_channels(cfa, x0, y0, 2, 2).ravel())
+    return cv2.cvtColor(as16, getattr(cv2, f"COLOR_Bayer{_PATTERN_NAMES[tile]}2BGR"))
+
+
+@lru_cache(maxsize=8)
+def _raw_to_16bit(black_DN: float, white_DN: float) -> NDArray[np.uint16]:
+    """Table from raw DN (0…65535) to the demosaic's 16-bit input: the float32 steps of
+    :func:`process` and :func:`demosaic` (subtract black, scale, clip to [0, 1], × 65535,
+    round) done once per code instead of once per pixel."""
+    linear = np.arange(1 << 16, dtype=np.uint16).astype(np.float32)
+    linear -= np.float32(black_DN)
+    linear *= np.float32(1.0 / (white_DN - black_DN))
+    return np.rint(np.clip(linear, 0.0, 1.0) * 65535.0).astype(np.uint16)
 
 
 def daylight_gains(camera: Camera) -> NDArray[np.float64]:
@@ -175,25 +188,27 @@ def process(
     check_isp_options(camera)
     if isp.noise_reduction != "none" and (analog_gain is None or not np.isfinite(analog_gain) or analog_gain <= 0):
         raise ValueError(f"analog_gain: noise reduction needs the frame's analog gain (> 0), got {analog_gain!r}")
-    # float32 and, after demosaicing, in blocks of rows: a full T6 frame is 18 M pixels
-    linear = raw.astype(np.float32)
-    linear -= np.float32(s.black_level_DN)
-    linear *= np.float32(1.0 / (s.white_level_DN - s.black_level_DN))
-    rgb = demosaic(linear, s.cfa, x0, y0)
+    # 16-bit through the demosaic, then float32 in blocks of rows: a full T6 frame is 18 M pixels
+    bgr16 = _demosaic_bgr16(_raw_to_16bit(s.black_level_DN, s.white_level_DN)[raw], s.cfa, x0, y0)
     if isp.white_balance == "daylight":
         gains = daylight_gains(camera)
     elif isp.white_balance == "auto":
+        linear = raw.astype(np.float32)
+        linear -= np.float32(s.black_level_DN)
+        linear *= np.float32(1.0 / (s.white_level_DN - s.black_level_DN))
         ch = cfa_channels(s.cfa, x0, y0, *raw.shape)
         means = np.array([linear[ch == c].mean() for c in range(3)])
+        del linear
         gains = auto_white_balance_gains(means, camera)
     else:
         raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
     matrix_t = camera_to_srgb_matrix(camera).T.astype(np.float32)
     gains32 = np.asarray(gains, dtype=np.float32)
     lut = None if isp.tone_curve == "srgb" else _tone_lut(isp.tone_curve, float(isp.tone_contrast))
-    rgb8 = np.empty(rgb.shape, dtype=np.uint8)
-    for r0 in range(0, rgb.shape[0], 256):
-        block = rgb[r0 : r0 + 256]
+    rgb8 = np.empty(bgr16.shape, dtype=np.uint8)
+    for r0 in range(0, bgr16.shape[0], 256):
+        block = bgr16[r0 : r0 + 256, :, ::-1].astype(np.float32, order="C")
+        block *= np.float32(1.0 / 65535.0)
         block *= gains32
         if isp.highlight == "clip":
             np.clip(block, 0.0, 1.0, out=block)
@@ -202,7 +217,7 @@ def process(
         # "unclip": values above 1 go through the matrix; the tone curve clips the output
         out = block @ matrix_t
         rgb8[r0 : r0 + 256] = srgb_encode_8bit(out) if lut is None else _apply_tone_lut(out, lut)
-    del rgb
+    del bgr16
     if isp.noise_reduction != "none":
         luma_h, chroma_h = noise_reduction_strength(camera, analog_gain)
         rgb8 = reduce_noise(rgb8, luma_h, chroma_h)
@@ -305,13 +320,15 @@ _LUT_BITS = 16
 
 
 @lru_cache(maxsize=1)
-def _srgb_8bit_tables() -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+def _srgb_8bit_tables() -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float32]]:
     """Bin tables for :func:`srgb_encode_8bit`: code at each bin's start, and the code step inside the bin.
 
     The 8-bit sRGB code steps up at t_k = decode((k + ½)/255), k = 0…254 (colour-science's
     curve). [0, 1] is cut into 2¹⁶ bins, narrower than the closest two steps (3 × 10⁻⁴),
     so a bin holds at most one step: ``base[i]`` counts the steps ≤ i/2¹⁶ and ``step[i]``
-    is the step inside bin i (∞ if none).
+    is the step inside bin i (∞ if none). ``step32[i]`` is the smallest float32 ≥ ``step[i]``:
+    for a float32 x, x ≥ step[i] exactly when x ≥ step32[i], so float32 input is compared
+    without widening it to float64.
     """
     t = np.asarray(colour.cctf_decoding((np.arange(255) + 0.5) / 255.0, function="sRGB"), dtype=np.float64)
     n = 1 << _LUT_BITS
@@ -321,7 +338,10 @@ def _srgb_8bit_tables() -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
     inside = np.searchsorted(t, starts[1:], side="left") - base  # steps strictly inside each bin
     assert inside.max() <= 1
     step[inside == 1] = t[base[inside == 1]]
-    return base.astype(np.uint8), step
+    step32 = step.astype(np.float32)
+    below = step32 < step
+    step32[below] = np.nextafter(step32[below], np.float32(np.inf))
+    return base.astype(np.uint8), step, step32
 
 
 def srgb_encode_8bit(linear: NDArray[np.float64]) -> NDArray[np.uint8]:
@@ -332,11 +352,12 @@ def srgb_encode_8bit(linear: NDArray[np.float64]) -> NDArray[np.uint8]:
     2¹⁶-bin table and one comparison instead of a fractional power per value: 18 MP × 3
     in under a second rather than ~7 s.
     """
-    base, step = _srgb_8bit_tables()
+    base, step, step32 = _srgb_8bit_tables()
     x = np.clip(linear, 0.0, 1.0, out=linear)
-    idx = np.minimum((x * (1 << _LUT_BITS)).astype(np.int32), (1 << _LUT_BITS) - 1)
+    idx = (x * (1 << _LUT_BITS)).astype(np.int32)  # × 2¹⁶ is exact, the cast truncates: the bin
+    np.minimum(idx, (1 << _LUT_BITS) - 1, out=idx)
     out = base[idx]
-    out += step[idx] <= x
+    out += (step32 if x.dtype == np.float32 else step)[idx] <= x
     return out
 
 

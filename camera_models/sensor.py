@@ -61,13 +61,8 @@ def _hash_uniform(x: NDArray[np.int64], y: NDArray[np.int64], seed: int, stream:
     return ((z >> np.uint64(11)).astype(np.float64) + 0.5) / float(1 << 53)
 
 
-def fixed_pattern_normal(sensor: SensorModel, x0: int, y0: int, height: int, width: int, stream: int):
-    """Standard-normal fixed-pattern values for the pixels of a crop (the same wherever the crop is)."""
-    return _fixed_pattern(sensor.fixed_pattern_seed, x0, y0, height, width, stream)
-
-
-@lru_cache(maxsize=8)
 def _fixed_pattern(seed: int, x0: int, y0: int, height: int, width: int, stream: int) -> NDArray[np.float32]:
+    """Standard-normal fixed-pattern values for the pixels of a crop (the same wherever the crop is)."""
     # float32 and in blocks of rows: a full 18 MP frame's pattern is 72 MB, its 64-bit
     # hashing temporaries would be several times that at once
     out = np.empty((height, width), dtype=np.float32)
@@ -78,7 +73,6 @@ def _fixed_pattern(seed: int, x0: int, y0: int, height: int, width: int, stream:
             np.broadcast_to(xs, (ys.shape[0], width)), np.broadcast_to(ys, (ys.shape[0], width)), seed, stream
         )
         out[r0 : r0 + ys.shape[0]] = math.sqrt(2.0) * special.erfinv(2.0 * u - 1.0)
-    out.setflags(write=False)
     return out
 
 
@@ -105,25 +99,54 @@ class SensorSettings:
             raise ValueError(f"analog_gain: expected a gain > 0, got {self.analog_gain!r}")
 
 
-def bloom(electrons: NDArray[np.float64], full_well_e: float, fraction: float, passes: int = 8) -> NDArray[np.float64]:
+def bloom(electrons: NDArray[np.float64], full_well_e: float, fraction: float, passes: int = 8) -> NDArray[np.float32]:
     """Clip charge at the full well, spilling ``fraction`` of the excess equally into the 4 neighbours.
 
     Repeated up to ``passes`` times so spilled charge can fill and overflow neighbours
     in turn; what does not spill goes to the anti-blooming drain. Charge spilled over the
-    crop's edge is lost.
+    crop's edge is lost. Returns a new float32 array (e⁻).
     """
     e = electrons.astype(np.float32, copy=True)
+    well = np.float32(full_well_e)
     for _ in range(passes):
+        if not e.max(initial=-np.inf) > well:  # one read, no temporary: most frames never fill a well
+            return e
         excess = np.clip(e - full_well_e, 0.0, None)
-        if not np.any(excess):
-            break
         e -= excess
         share = excess * (fraction / 4.0)
         e[1:, :] += share[:-1, :]
         e[:-1, :] += share[1:, :]
         e[:, 1:] += share[:, :-1]
         e[:, :-1] += share[:, 1:]
-    return np.minimum(e, full_well_e)
+    return np.minimum(e, full_well_e, out=e)
+
+
+_ROWS = 256
+"""Rows per block of the per-pixel work: a block of a full frame stays in the processor's cache."""
+
+
+def _pixel_patterns(
+    sensor: SensorModel, x0: int, y0: int, height: int, width: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+    """The sensor's fixed-pattern factors for a crop, read-only float32 (rows, columns):
+    1 + PRNU, the dark-current factor max(1 + DSNU_I, 0), and the offset DSNU in DN."""
+    key = (sensor.fixed_pattern_seed, sensor.prnu_fraction, sensor.dsnu_dark_current_fraction, sensor.dsnu_offset_DN)
+    return _pixel_patterns_of(*key, x0, y0, height, width)
+
+
+@lru_cache(maxsize=4)  # a whole T6 frame's three factors are 216 MB
+def _pixel_patterns_of(
+    seed: int, prnu: float, dsnu_dark: float, dsnu_offset: float, x0: int, y0: int, height: int, width: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+    f32 = np.float32
+    gain = 1.0 + f32(prnu) * _fixed_pattern(seed, x0, y0, height, width, stream=1)
+    dark = _fixed_pattern(seed, x0, y0, height, width, stream=2) * f32(dsnu_dark)
+    dark += 1.0
+    np.clip(dark, 0.0, None, out=dark)
+    offset = f32(dsnu_offset) * _fixed_pattern(seed, x0, y0, height, width, stream=3)
+    for a in (gain, dark, offset):
+        a.setflags(write=False)
+    return gain, dark, offset
 
 
 def expose(
@@ -149,41 +172,62 @@ def expose(
         Seed of the temporal noise.
     x0, y0
         Frame position of the crop's top-left pixel (for the fixed pattern).
+
+    Notes
+    -----
+    float32 throughout, in blocks of :data:`_ROWS` rows where the arithmetic is per pixel.
+    The temporal draws keep one order (every pixel's shot noise, then every pixel's
+    read noise before the gain, then after it, then the row noise), and a generator's
+    draws split into consecutive blocks equal one draw of the whole, so the bytes do not
+    depend on the block size.
     """
     settings.validate()
     h, w = mean_electrons.shape
     rng = np.random.Generator(np.random.PCG64(seed))
     f32 = np.float32
-    # float32 and in place throughout: a full T6 frame is 18 M pixels (72 MB per array)
-    mu = np.clip(mean_electrons, 0.0, None).astype(f32)
-    mu *= 1.0 + f32(sensor.prnu_fraction) * fixed_pattern_normal(sensor, x0, y0, h, w, stream=1)
-    dark = fixed_pattern_normal(sensor, x0, y0, h, w, stream=2) * f32(sensor.dsnu_dark_current_fraction)
-    dark += 1.0
-    np.clip(dark, 0.0, None, out=dark)
-    mu += dark * f32(sensor.dark_current_e_per_s * settings.exposure_s)
-    del dark
-    electrons = rng.poisson(mu).astype(f32)
-    del mu
+    gain_fp, dark_fp, offset_fp = _pixel_patterns(sensor, x0, y0, h, w)
+    dark_e = f32(sensor.dark_current_e_per_s * settings.exposure_s)
+    electrons = np.empty((h, w), dtype=f32)
+    for r in _blocks(h):
+        mu = np.clip(mean_electrons[r], 0.0, None).astype(f32)
+        mu *= gain_fp[r]
+        mu += dark_fp[r] * dark_e
+        electrons[r] = rng.poisson(mu)
     electrons = bloom(electrons, sensor.full_well_e, sensor.blooming_fraction)
     pre, post = sensor.read_noise_split()
-    electrons += rng.standard_normal((h, w), dtype=f32) * f32(pre)
+    for r in _blocks(h):
+        electrons[r] += rng.standard_normal(electrons[r].shape, dtype=f32) * f32(pre)
     K = sensor.K_DN_per_e(settings.analog_gain)
     row_sd = post * math.sqrt(sensor.row_noise_fraction)
     pix_sd = post * math.sqrt(1.0 - sensor.row_noise_fraction)
     dn = electrons
-    dn *= f32(K)
-    dn += rng.standard_normal((h, w), dtype=f32) * f32(pix_sd)
-    dn += rng.standard_normal((h, 1), dtype=f32) * f32(row_sd)
-    dn += f32(sensor.black_level_DN)
-    dn += f32(sensor.dsnu_offset_DN) * fixed_pattern_normal(sensor, x0, y0, h, w, stream=3)
+    for r in _blocks(h):
+        dn[r] *= f32(K)
+        dn[r] += rng.standard_normal(dn[r].shape, dtype=f32) * f32(pix_sd)
+    row = rng.standard_normal((h, 1), dtype=f32) * f32(row_sd)
     top = min(sensor.white_level_DN, 2**sensor.adc_bits - 1)
-    return np.clip(np.rint(dn), 0, top).astype(np.uint16)
+    out = np.empty((h, w), dtype=np.uint16)
+    for r in _blocks(h):
+        block = dn[r]
+        block += row[r]
+        block += f32(sensor.black_level_DN)
+        block += offset_fp[r]
+        out[r] = np.clip(np.rint(block, out=block), 0, top, out=block)
+    return out
+
+
+def _blocks(rows: int) -> list[slice]:
+    return [slice(r0, min(r0 + _ROWS, rows)) for r0 in range(0, rows, _ROWS)]
 
 
 def mosaic(rgb: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:
     """Pick each pixel's own channel from an (rows, columns, 3) image by the CFA."""
-    ch = cfa_channels(cfa, x0, y0, rgb.shape[0], rgb.shape[1])
-    return np.take_along_axis(rgb, ch[..., None].astype(np.intp), axis=2)[..., 0]
+    ch = cfa_channels(cfa, x0, y0, 2, 2)
+    out = np.empty(rgb.shape[:2], dtype=rgb.dtype)
+    for dy in range(2):
+        for dx in range(2):
+            out[dy::2, dx::2] = rgb[dy::2, dx::2, ch[dy, dx]]
+    return out
 
 
 def clipped_normal_variance(mean: float, sd: float, clip: float) -> float:

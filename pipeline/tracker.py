@@ -188,7 +188,9 @@ def find_blobs(image, settings: TrackerSettings | None = None, crop_origin_px=(0
     if bgr is None:
         return [], reason
     lut = _linear_lut(bgr.dtype, s)
-    y = _to_linear(bgr.max(axis=2), lut)  # max commutes with the monotonic decoding
+    brightest = np.maximum(bgr[..., 0], bgr[..., 1])  # channel by channel: ndarray.max(axis=2) is 10x slower
+    np.maximum(brightest, bgr[..., 2], out=brightest)
+    y = _to_linear(brightest, lut)  # max commutes with the monotonic decoding
     step = max(1, int(np.sqrt(y.size / 250_000)))  # a subsample is enough for the statistics
     sub = y[::step, ::step]
     bg = float(np.median(sub))

@@ -152,12 +152,34 @@ def side_current_mA(scenario: Scenario, side: str) -> float:
     return min(led.reference_current_mA * fraction, led.max_current_mA)
 
 
-def render_unit_groups(spec: dict, spp: int, seed: int, groups: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+def render_unit_groups(
+    spec: dict, spp: int, seed: int, groups: Sequence[str] | None = None, *, reuse_kernels: bool = True
+) -> dict[str, np.ndarray]:
     """Render each emitter group of ``spec`` (or those in ``groups``) alone at unit scale.
 
-    Returns images (float32, W·m⁻²·sr⁻¹ per unit of the group's scale: per W·sr⁻¹ of
-    on-axis LED intensity, or per W·m⁻²·sr⁻¹ of ceiling radiance) keyed by group.
+    Parameters
+    ----------
+    spec
+        Scene description (:func:`scenes.assemble.scene_spec`).
+    spp
+        Samples per (sub-)pixel.
+    seed
+        Base seed; group ``i`` (index in :func:`scenes.assemble.emitter_groups`) renders
+        with seed ``seed * 7919 + i``.
+    groups
+        Groups to render; default all of them.
+    reuse_kernels
+        JIT variants: render through :func:`_render_primal`, whose kernel does not depend
+        on the crop, so a new geometry reuses the kernel compiled for an earlier one (same
+        pixels as ``mitsuba.render``); ``False`` renders with ``mitsuba.render``.
+
+    Returns
+    -------
+    dict[str, numpy.ndarray]
+        Images (float32, W·m⁻²·sr⁻¹ per unit of the group's scale: per W·sr⁻¹ of on-axis
+        LED intensity, or per W·m⁻²·sr⁻¹ of ceiling radiance) keyed by group.
     """
+    import drjit as dr
     import mitsuba as mi
 
     wanted = [(i, g) for i, g in enumerate(emitter_groups(spec)) if groups is None or g in groups]
@@ -189,8 +211,132 @@ def render_unit_groups(spec: dict, spp: int, seed: int, groups: Sequence[str] | 
     for index, group in wanted:
         for other, entries in by_group.items():
             for key, value in entries:
-                params[key] = value if other == group else 0.0
+                # opaque: a literal radiance would make each group's kernel a different one
+                params[key] = dr.opaque(mi.Float, value if other == group else 0.0)
         params.update()
-        image = np.asarray(mi.render(scene, params, seed=seed * 7919 + index, spp=spp))
+        group_seed = seed * 7919 + index
+        if reuse_kernels:
+            image = np.asarray(_render_primal(scene, group_seed, spp))
+        else:
+            image = np.asarray(mi.render(scene, params, seed=group_seed, spp=spp))
         out[group] = np.ascontiguousarray(image.mean(axis=-1), dtype=np.float32)
     return out
+
+
+_MIN_BLOCK_ENTRIES = 1 << 12
+"""Smallest accumulation buffer of :func:`_render_primal`, in float32 entries."""
+
+
+def _render_primal(scene, seed: int, spp: int):
+    """``mitsuba.render(scene, seed=seed, spp=spp)`` with a kernel that does not depend on the crop.
+
+    Mitsuba's ``SamplingIntegrator::render`` (JIT branch, v3.9) bakes the film's crop size
+    and offset into the rendering kernel as literals, so every new geometry (new crop)
+    compiles a new kernel (~150 ms with LLVM). This is the same computation, operation for
+    operation, with those values opaque: the image-plane position of a sample uses opaque
+    crop offset and size, and the samples accumulate into a buffer whose length is rounded
+    up to a power of two (Dr.Jit's expanded scatter-reduction bakes the target's length
+    into the kernel); its first ``width × height × channels`` entries are then the image
+    block ``mitsuba.render`` fills. Integer arithmetic is exact and every floating-point
+    operation is the same, so the pixels are identical.
+
+    Parameters
+    ----------
+    scene
+        Loaded ``mitsuba.Scene`` with a perspective sensor, an ``hdrfilm`` with a box
+        filter and no border, and a sampling integrator without AOVs.
+    seed
+        Sampler seed.
+    spp
+        Samples per pixel (one pass).
+
+    Returns
+    -------
+    mitsuba.TensorXf
+        The developed film, (crop height, crop width, channels).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    sensor = scene.sensors()[0]
+    film, sampler, integrator = sensor.film(), sensor.sampler(), scene.integrator()
+    if (
+        film.sample_border()
+        or not film.rfilter().is_box_filter()
+        or integrator.aov_names()
+        or sensor.needs_aperture_sample()
+        or sensor.shutter_open_time() > 0
+    ):
+        raise ValueError("_render_primal: expected a box filter, no border, no AOVs, a pinhole and no shutter time")
+    camera = mi.traverse(sensor)
+    if camera["principal_point_offset_x"][0] != 0 or camera["principal_point_offset_y"][0] != 0:
+        raise ValueError("_render_primal: expected the principal point at the centre of the film")
+    width, height = (int(v) for v in film.crop_size())
+    offset_x, offset_y = (int(v) for v in film.crop_offset())
+    with dr.suspend_grad():
+        sampler.set_sample_count(spp)
+        n_channels = film.prepare(integrator.aov_names())
+        if n_channels != 4:
+            raise ValueError(f"_render_primal: expected a film with channels R, G, B, W, got {n_channels} channels")
+        wavefront_size = width * height * spp
+        sampler.set_samples_per_wavefront(spp)
+        sampler.seed(seed, wavefront_size)
+        # sample index → pixel index (row-major in the crop) → pixel position in the frame
+        pixel = dr.arange(mi.UInt32, wavefront_size)
+        if spp & (spp - 1) == 0:
+            pixel >>= dr.opaque(mi.UInt32, spp.bit_length() - 1)
+        else:
+            pixel //= dr.opaque(mi.UInt32, spp)
+        row = pixel // dr.opaque(mi.UInt32, width)
+        pos = mi.Vector2f(
+            mi.Int32(pixel - row * dr.opaque(mi.UInt32, width)) + dr.opaque(mi.Int32, offset_x),
+            mi.Int32(row) + dr.opaque(mi.Int32, offset_y),
+        )
+        # render_sample(): jittered position in [0, 1]² of the crop, then the camera ray
+        scale_x, scale_y = np.float32(1.0) / np.float32(width), np.float32(1.0) / np.float32(height)
+        sample_pos = pos + sampler.next_2d(True)
+        adjusted_pos = dr.fma(
+            sample_pos,
+            mi.Vector2f(dr.opaque(mi.Float, scale_x), dr.opaque(mi.Float, scale_y)),
+            mi.Vector2f(
+                dr.opaque(mi.Float, -np.float32(offset_x) * scale_x),
+                dr.opaque(mi.Float, -np.float32(offset_y) * scale_y),
+            ),
+        )
+        # the perspective camera adds film size × principal point offset / crop size, zero
+        # here, with the crop size as a literal: trace it with the full frame as the crop
+        # (its sample-to-camera transform was computed for the real crop when it was loaded)
+        # (only the film is updated: the camera keeps the transform of the real crop)
+        _set_crop(film, mi.ScalarPoint2u(0, 0), film.size())
+        try:
+            ray, ray_weight = sensor.sample_ray_differential(
+                mi.Float(sensor.shutter_open()), mi.Float(0.0), adjusted_pos, mi.Point2f(0.5)
+            )
+        finally:
+            _set_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
+        ray.scale_differential(float(np.float32(1.0) / np.sqrt(np.float32(spp))))
+        spec, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
+        value = mi.unpolarized_spectrum(ray_weight * spec)
+        rgb = [value[0]] * 3 if mi.is_monochromatic else [value[0], value[1], value[2]]
+        # ImageBlock::put() of a box filter: channels (R, G, B, W) at the pixel's index
+        n_entries = width * height * n_channels
+        if n_entries <= dr.expand_threshold():
+            mode = dr.ReduceMode.Expand
+        else:
+            mode = dr.ReduceMode.Local if dr.flag(dr.JitFlag.ScatterReduceLocal) else dr.ReduceMode.Direct
+        block = dr.zeros(mi.Float, max(_MIN_BLOCK_ENTRIES, 1 << (n_entries - 1).bit_length()))
+        dr.scatter_reduce(dr.ReduceOp.Add, block, mi.ArrayXf(*rgb, mi.Float(1.0)), pixel, True, mode)
+        tensor = mi.TensorXf(dr.gather(mi.Float, block, dr.arange(mi.UInt32, n_entries)), (height, width, n_channels))
+        film.put_block(mi.ImageBlock(tensor, film.crop_offset()))
+        return film.develop()
+
+
+def _set_crop(film, offset, size) -> None:
+    """Set a ``mitsuba.Film``'s crop window (offset and size in film pixels) without
+    notifying its sensor."""
+    import mitsuba as mi
+
+    params = mi.traverse(film)
+    params["crop_offset"] = offset
+    params["crop_size"] = size
+    params.update()

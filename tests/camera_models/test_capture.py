@@ -97,3 +97,59 @@ def test_srgb_8bit_table_matches_colour_science():
     x = np.concatenate([rng.uniform(-0.2, 1.2, 200_000), rng.uniform(0.0, 0.005, 100_000), np.linspace(0, 1, 100_001)])
     ref = np.rint(colour.cctf_encoding(np.clip(x, 0.0, 1.0), function="sRGB") * 255.0).astype(np.uint8)
     assert np.array_equal(srgb_encode_8bit(x.copy()), ref)
+
+
+def test_srgb_8bit_float32_input_gets_the_codes_of_its_exact_value():
+    """float32 input is compared with float32 thresholds rounded up: the same codes as the
+    float64 path on the same values, including values one float32 step either side of
+    every code threshold."""
+    import colour
+
+    from camera_models.isp import srgb_encode_8bit
+
+    t = np.asarray(colour.cctf_decoding((np.arange(255) + 0.5) / 255.0, function="sRGB"), dtype=np.float64)
+    t32 = t.astype(np.float32)
+    near = np.concatenate([t32, np.nextafter(t32, np.float32(0)), np.nextafter(t32, np.float32(1))])
+    x = np.concatenate([near, np.random.default_rng(4).uniform(-0.1, 1.1, 300_000).astype(np.float32)])
+    ref = np.rint(colour.cctf_encoding(np.clip(x.astype(np.float64), 0.0, 1.0), function="sRGB") * 255.0)
+    assert np.array_equal(srgb_encode_8bit(x.copy()), ref.astype(np.uint8))
+
+
+def test_sensor_bytes_do_not_depend_on_the_block_size(monkeypatch):
+    """The sensor works in blocks of rows; its draws split into blocks equal one draw of
+    the whole, so the raw frame is the same for any block size (here 256 and 7 rows)."""
+    from camera_models import sensor
+
+    s = load_camera("canon-t6-18mm").sensor
+    mean = np.random.default_rng(0).gamma(0.5, 4e4, size=(300, 64))  # some pixels over the full well: blooming
+    settings = SensorSettings(1 / 60, 8.0)
+    a = expose(mean, s, settings, seed=9, x0=3, y0=5)
+    monkeypatch.setattr(sensor, "_ROWS", 7)
+    b = expose(mean, s, settings, seed=9, x0=3, y0=5)
+    assert a.dtype == np.uint16 and np.array_equal(a, b)
+    assert (a == min(s.white_level_DN, 2**s.adc_bits - 1)).any()
+
+
+def test_full_frame_mosaic_is_the_mosaic_of_the_full_frame():
+    """The whole-frame mean electrons equal :func:`mosaic` of the three-channel frame built
+    explicitly: the background upsampled by nearest neighbour, the crop pasted in."""
+    import math
+
+    from camera_models.capture import full_frame_mosaic
+    from camera_models.sensor import cfa_channels, mosaic
+
+    cam = load_camera("logitech-c270")
+    g = cam.geometry
+    rng = np.random.default_rng(2)
+    bg = rng.uniform(0, 50, size=(g.height_px // 16 + 1, g.width_px // 16, 3))
+    crop = rng.uniform(0, 900, size=(31, 45, 3))
+    x0, y0 = 101, 58  # odd: the crop starts on another CFA phase
+    scale = math.ceil(g.width_px / bg.shape[1])
+    frame = np.repeat(np.repeat(bg.astype(np.float32), scale, axis=0), scale, axis=1)[: g.height_px, : g.width_px]
+    frame[y0 : y0 + 31, x0 : x0 + 45] = crop
+    ref = np.take_along_axis(frame, cfa_channels(cam.sensor.cfa, 0, 0, *frame.shape[:2])[..., None], axis=2)[..., 0]
+    assert np.array_equal(mosaic(frame, cam.sensor.cfa), ref)
+    assert np.array_equal(full_frame_mosaic(crop, x0, y0, cam, bg), ref)
+    assert np.array_equal(
+        full_frame_mosaic(crop, x0, y0, cam, None)[y0 : y0 + 31, x0 : x0 + 45], ref[y0 : y0 + 31, x0 : x0 + 45]
+    )

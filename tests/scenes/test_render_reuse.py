@@ -1,0 +1,111 @@
+"""Kernel reuse across geometries: the crop-independent render gives mitsuba.render's pixels."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from scenes.render import render_unit_groups
+from scenes.shapes import disk_shape, rect_shape
+
+pytestmark = pytest.mark.usefixtures("mitsuba_variant")
+
+
+def _spec(camera_x: float, crop: list[int]) -> dict:
+    """A lit disc (group ``led:a``) over a floor lit by a ceiling panel (``ambient``), seen
+    from ``camera_x`` m along -x on a 64 × 48 film; the structure does not depend on the
+    arguments, only the camera pose and the crop (x0, y0, width, height) do."""
+    face = {"type": "marker_face", "group": "led:a", "radiance": 2.5, "exponent": 3.0}
+    ceiling = {"type": "area", "group": "ambient", "radiance": 1.0}
+    return {
+        "sensor": {
+            "position": [camera_x, 0.0, 0.0],
+            "target": [camera_x + 1.0, 0.0, 0.0],
+            "up": [0.0, 0.0, -1.0],
+            "fov_x_deg": 40.0,
+            "film": [64, 48],
+            "crop": crop,
+        },
+        "materials": {"grey": 0.5, "white": 0.8},
+        "shapes": [
+            disk_shape(np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.2, 0.1]), 0.2, "white", face),
+            rect_shape(np.array([1.0, 0.0, 0.3]), [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 2.0, 2.0, "grey"),
+            rect_shape(np.array([1.0, 0.0, -0.6]), [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], 2.0, 2.0, "grey", ceiling),
+        ],
+        "max_depth": 4,
+    }
+
+
+# two geometries whose blocks (width × height × 4 channels) need the same power-of-two buffer
+GEOMETRIES = [(-0.5, [8, 4, 40, 30]), (-0.8, [20, 10, 36, 30])]
+
+
+def _render_kernel_hash(history: list[dict]) -> str:
+    """Hash of the largest kernel of a kernel history (the path tracer's)."""
+    return max((k for k in history if "operation_count" in k), key=lambda k: k["operation_count"])["hash"]
+
+
+@pytest.mark.parametrize("spp", [4, 3])
+def test_reused_kernel_renders_the_same_pixels_as_mitsuba_render(spp):
+    import drjit as dr
+
+    hashes = []
+    for camera_x, crop in GEOMETRIES:
+        spec = _spec(camera_x, crop)
+        dr.kernel_history()  # clear
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            reused = render_unit_groups(spec, spp, 5)
+            hashes.append(_render_kernel_hash(dr.kernel_history()))
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        fresh = render_unit_groups(spec, spp, 5, reuse_kernels=False)
+        assert sorted(reused) == sorted(fresh) == ["ambient", "led:a"]
+        for group, image in fresh.items():
+            assert image.shape == (crop[3], crop[2])
+            assert image.max() > 0, group
+            np.testing.assert_array_equal(reused[group], image, err_msg=f"{group}, crop {crop}")
+    assert hashes[0] == hashes[1], "a new crop and camera pose compiled a new render kernel"
+
+
+def test_reused_kernel_on_a_beacon_scene_at_two_ranges():
+    from scenes.assemble import scene_spec
+    from scenes.scenario import RenderSettings, Scenario
+
+    settings = RenderSettings(spp=4, oversampling=1, crop="target", near_field_spp=16)
+    for range_m in (9.0, 11.0):
+        spec = scene_spec(Scenario(range_m=range_m, render=settings))
+        reused = render_unit_groups(spec, 4, 7, ["led:red"])["led:red"]
+        fresh = render_unit_groups(spec, 4, 7, ["led:red"], reuse_kernels=False)["led:red"]
+        assert reused.max() > 0
+        np.testing.assert_array_equal(reused, fresh, err_msg=f"range {range_m} m")
+
+
+SCALAR_CODE = (
+    "import json, numpy as np, sys; sys.path.insert(0, 'tests/scenes');"
+    "from scenes.mitsuba_variant import select_variant; v = select_variant('mono').variant;"
+    "from test_render_reuse import GEOMETRIES, _spec; from scenes.render import render_unit_groups;"
+    "spec = _spec(*GEOMETRIES[0]);"
+    "a = render_unit_groups(spec, 2, 5); b = render_unit_groups(spec, 2, 5, reuse_kernels=False);"
+    "print(json.dumps([v, {g: [a[g].shape, bool(np.array_equal(a[g], b[g])), float(a[g].max())] for g in a}]))"
+)
+
+
+def test_scalar_fallback_ignores_kernel_reuse():
+    """The scalar variant renders one scene per group, as before, whatever ``reuse_kernels`` says."""
+    env = {**os.environ, "BEACON_SIM_VARIANT": "scalar"}
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.run(
+        [sys.executable, "-c", SCALAR_CODE], capture_output=True, text=True, env=env, cwd=root, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    variant, groups = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert variant == "scalar_rgb"
+    assert sorted(groups) == ["ambient", "led:a"]
+    for group, (shape, same, peak) in groups.items():
+        assert shape == [30, 40] and same and peak > 0, group
