@@ -2,11 +2,13 @@
 
 Only the crop around the beacon is rendered, at ``oversampling``² sub-pixels per camera
 pixel. The scene is loaded once; each emitter group (a side's LEDs, the ambient light)
-is rendered by zeroing the other groups' radiance parameters, so Dr.Jit compiles one
-kernel per scene and reuses it. Renders are cached on disk by a content hash of the
-scene description, render settings, Mitsuba variant and :data:`RENDER_VERSION`; the
-LED drive and the ambient level are not part of the key because they only scale the
-cached unit images (linearity).
+is rendered by zeroing the other groups' (opaque) radiance parameters, and the render
+loop keeps the crop out of the kernel (:func:`_render_primal`), so Dr.Jit compiles one
+kernel per scene structure and block size class and reuses it for every group, range,
+yaw and crop, in this process and (through its disk cache) in later ones. Renders are
+cached on disk by a content hash of the scene description, render settings, Mitsuba
+variant and :data:`RENDER_VERSION`; the LED drive and the ambient level are not part of
+the key because they only scale the cached unit images (linearity).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +35,9 @@ from scenes.near_field import exit_spectral_factor
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 from scenes.render_cache import RenderCache, content_key
 from scenes.scenario import Scenario
+
+if TYPE_CHECKING:
+    import mitsuba as mi
 
 log = logging.getLogger("beacon_sim")
 
@@ -227,10 +233,11 @@ _MIN_BLOCK_ENTRIES = 1 << 12
 """Smallest accumulation buffer of :func:`_render_primal`, in float32 entries."""
 
 
-def _render_primal(scene, seed: int, spp: int):
+def _render_primal(scene: mi.Scene, seed: int, spp: int) -> mi.TensorXf:
     """``mitsuba.render(scene, seed=seed, spp=spp)`` with a kernel that does not depend on the crop.
 
-    Mitsuba's ``SamplingIntegrator::render`` (JIT branch, v3.9) bakes the film's crop size
+    Mitsuba's ``SamplingIntegrator::render`` (JIT branch of v3.9.1, the pinned version;
+    ``render_sample`` and the box-filter ``ImageBlock::put``) bakes the film's crop size
     and offset into the rendering kernel as literals, so every new geometry (new crop)
     compiles a new kernel (~150 ms with LLVM). This is the same computation, operation for
     operation, with those values opaque: the image-plane position of a sample uses opaque
@@ -268,10 +275,12 @@ def _render_primal(scene, seed: int, spp: int):
         or sensor.shutter_open_time() > 0
     ):
         raise ValueError("_render_primal: expected a box filter, no border, no AOVs, a pinhole and no shutter time")
+    width, height = (int(v) for v in film.crop_size())
+    if width * height * spp > 0xFFFFFFFF:
+        raise ValueError("_render_primal: expected at most 2³² samples (one pass)")
     camera = mi.traverse(sensor)
     if camera["principal_point_offset_x"][0] != 0 or camera["principal_point_offset_y"][0] != 0:
         raise ValueError("_render_primal: expected the principal point at the centre of the film")
-    width, height = (int(v) for v in film.crop_size())
     offset_x, offset_y = (int(v) for v in film.crop_offset())
     with dr.suspend_grad():
         sampler.set_sample_count(spp)
@@ -303,10 +312,9 @@ def _render_primal(scene, seed: int, spp: int):
                 dr.opaque(mi.Float, -np.float32(offset_y) * scale_y),
             ),
         )
-        # the perspective camera adds film size × principal point offset / crop size, zero
-        # here, with the crop size as a literal: trace it with the full frame as the crop
-        # (its sample-to-camera transform was computed for the real crop when it was loaded)
-        # (only the film is updated: the camera keeps the transform of the real crop)
+        # the perspective camera adds film size × principal point offset / crop size (zero
+        # here) with the crop size as a literal: trace it with the full frame as the film's
+        # crop; the camera keeps the sample-to-camera transform of the real crop
         _set_crop(film, mi.ScalarPoint2u(0, 0), film.size())
         try:
             ray, ray_weight = sensor.sample_ray_differential(
@@ -315,12 +323,13 @@ def _render_primal(scene, seed: int, spp: int):
         finally:
             _set_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
         ray.scale_differential(float(np.float32(1.0) / np.sqrt(np.float32(spp))))
-        spec, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
-        value = mi.unpolarized_spectrum(ray_weight * spec)
+        radiance, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
+        value = mi.unpolarized_spectrum(ray_weight * radiance)
         rgb = [value[0]] * 3 if mi.is_monochromatic else [value[0], value[1], value[2]]
         # ImageBlock::put() of a box filter: channels (R, G, B, W) at the pixel's index
         n_entries = width * height * n_channels
-        if n_entries <= dr.expand_threshold():
+        # the mode ReduceMode.Auto picks for the block (it decides the order of the sums)
+        if dr.backend_v(mi.Float) == dr.JitBackend.LLVM and n_entries <= dr.expand_threshold():
             mode = dr.ReduceMode.Expand
         else:
             mode = dr.ReduceMode.Local if dr.flag(dr.JitFlag.ScatterReduceLocal) else dr.ReduceMode.Direct
@@ -331,7 +340,7 @@ def _render_primal(scene, seed: int, spp: int):
         return film.develop()
 
 
-def _set_crop(film, offset, size) -> None:
+def _set_crop(film: mi.Film, offset: mi.ScalarPoint2u, size: mi.ScalarVector2u) -> None:
     """Set a ``mitsuba.Film``'s crop window (offset and size in film pixels) without
     notifying its sensor."""
     import mitsuba as mi

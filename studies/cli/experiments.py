@@ -216,6 +216,8 @@ def bench(
         ("two_stage_vs_brute_force", b.two_stage_vs_brute_force),
         ("reuse_vs_rerender", b.reuse_vs_rerender),
         ("frame_vs_memcpy", b.frame_vs_memcpy),
+        ("warm_frames", b.warm_frames),
+        ("cold_renders", b.cold_renders),
         ("workers_and_dask", b.workers_and_dask),
         ("full_grid_estimate", b.full_grid_estimate),
     ]
@@ -235,6 +237,12 @@ def bench(
         "llvm_vs_scalar": details["variant"]["ratio"] if "variant" in details else None,
         "full_grid_cold_h": details["full_grid_estimate"]["cold_h"],
         "full_grid_warm_h": details["full_grid_estimate"]["warm_h"],
+        "warm_frame_ms": details["warm_frames"]["full"]["median_ms"],
+        "warm_frame_crop_ms": details["warm_frames"]["crop"]["median_ms"],
+        "cold_render_s": details["cold_renders"]["cold_render_s"],
+        "near_field_s": details["cold_renders"]["near_field_s"],
+        "full_frame_s": details["frame_vs_memcpy"]["frame_s"],
+        "replication_cold_h": details["full_grid_estimate"]["cold_h"],
         "details": details,
     }
     if json_out:
@@ -248,6 +256,15 @@ def bench(
     t.add_row("full T6 frame (optics+sensor+ISP+detect) / memcpy", f"{result['frame_vs_memcpy']:.0f}×", "≤ 20×")
     codec = details["frame_vs_memcpy"]["jpeg_codec_vs_memcpy"]
     t.add_row("  floor: JPEG encode + decode alone / memcpy", f"{codec:.0f}×", "")
+    warm = details["warm_frames"]
+    t.add_row(
+        f"warm frame, median over {warm['frames']} frames of the quick studies: whole frame / crop",
+        f"{warm['full']['median_ms']:.0f} ms / {warm['crop']['median_ms']:.1f} ms",
+        "≤ 5 ms",
+    )
+    t.add_row("cold render per new geometry, after the worker's first", f"{result['cold_render_s']:.2f} s", "≤ 0.2 s")
+    t.add_row("near field of one marker configuration and colour", f"{result['near_field_s']:.1f} s", "≤ 5 s")
+    t.add_row("full T6 frame (camera + JPEG + both detectors)", f"{result['full_frame_s']:.2f} s", "≤ 1.0 s")
     t.add_row("study throughput, 2 vs 1 workers", f"{result['workers_2_vs_1']:.2f}×", "≥ 1.7×")
     t.add_row("Dask LocalCluster overhead vs local pool", f"{result['dask_overhead']:+.1%}", "≤ 10 %")
     with_start = details["workers_and_dask"]["dask_overhead_with_cluster_start"]

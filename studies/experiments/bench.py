@@ -13,6 +13,7 @@ once per marker configuration and cached.
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import resource
@@ -33,7 +34,7 @@ from camera_models.isp import encode_jpeg
 from pipeline.detect import detect
 from scenes.beacon import beacon_design
 from scenes.led import led_for_side
-from scenes.near_field import NearFieldSettings, marker_emission
+from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
@@ -180,6 +181,117 @@ def frame_vs_memcpy(repeats: int = 3) -> dict:
         "jpeg_encode_decode_s": float(np.median(codec)),
         "jpeg_codec_vs_memcpy": float(np.median(codec)) / memcpy,
         "frame_bytes": int(frame.nbytes),
+    }
+
+
+STUDY_MIX = ("range_limit", "brightness_diffuser", "webcam_vs_dslr")
+"""The studies whose quick forms make the warm-frame mix (the main job's three studies)."""
+
+
+def study_mix(per_study: int = 8, seed: int = 0) -> list[dict]:
+    """``per_study`` frame tasks drawn at random from each quick study of :data:`STUDY_MIX`,
+    as the study makes them (whole frames, its estimators)."""
+    from importlib import import_module
+
+    from studies.engine.tasks import grid_conditions
+
+    rng = random.Random(seed)
+    tasks = []
+    for name in STUDY_MIX:
+        options = import_module(f"studies.catalog.{name}").default_options(quick=True)
+        estimators = None if name == "webcam_vs_dslr" else ["best"]
+        tasks += rng.sample(frame_tasks(grid_conditions(options), options, estimators=estimators), per_study)
+    return tasks
+
+
+def warm_frames(per_study: int = 8, repeats: int = 2) -> dict:
+    """Median time of a warm frame over the study mix (:func:`study_mix`): the render
+    cached, the camera model on the whole frame and every detector the study runs, as
+    :func:`studies.engine.frame.simulate_frame` does in a study; and the same tasks on the
+    crop around the beacon (the path the issue's 68 ms was measured on), side by side.
+
+    Renders come from the render cache (filled by a first, untimed pass when missing,
+    as after the main job). Each frame's time is the smallest of ``repeats``.
+    """
+
+    tasks = study_mix(per_study)
+    crops = [{k: v for k, v in t.items() if k != "full_frame"} for t in tasks]
+    for t in tasks:
+        simulate_frame(t)  # renders and near fields into the cache, untimed
+    out = {}
+    for label, work in (("full", tasks), ("crop", crops)):
+        times = []
+        for t in work:
+            best = math.inf
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                simulate_frame(t)
+                best = min(best, time.perf_counter() - t0)
+            times.append(best)
+        out[label] = {
+            "median_ms": 1e3 * float(np.median(times)),
+            "mean_ms": 1e3 * float(np.mean(times)),
+            "max_ms": 1e3 * float(np.max(times)),
+            "by_camera_median_ms": {
+                cam: 1e3
+                * float(np.median([x for x, t in zip(times, work, strict=True) if t["scenario"]["camera"] == cam]))
+                for cam in sorted({t["scenario"]["camera"] for t in work})
+            },
+        }
+    return {"frames": len(tasks), "studies": list(STUDY_MIX), **out}
+
+
+def cold_renders(geometries: int = 6) -> dict:
+    """A new diffuser configuration's near field, then renders of new geometries in one
+    process after its first render, with an empty render cache.
+
+    ``near_field_s``: the exit-radiance and housing-leak renders of the bench marker
+    (V2 red, foam + 1 matched sheet) at the studies' near-field sampling, paid once per
+    configuration and colour. ``cold_render_s``: the median time to render a geometry
+    (a new range and yaw: new camera pose, new crop) once the process has rendered one,
+    as a study worker does for every pose after its first.
+    """
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            scenario = Scenario(**BENCH_SCENARIO, render=RenderSettings(**RENDER))
+            near = NearFieldSettings(spp=scenario.render.near_field_spp)
+            t0 = time.perf_counter()
+            marker_emission(
+                scenario.design,
+                led_for_side(scenario.side),
+                scenario.housing,
+                scenario.diffuser,
+                scenario.side,
+                settings=near,
+            )
+            housing_leak(
+                scenario.design,
+                led_for_side(scenario.side),
+                scenario.housing,
+                scenario.diffuser,
+                scenario.side,
+                settings=near,
+            )
+            near_field_s = time.perf_counter() - t0
+            render(scenario)  # the worker's first render, untimed
+            times = []
+            for k in range(geometries):
+                geometry = {"range_m": 3.0 + 0.9 * k, "yaw_deg": -25.0 + 10.0 * k}
+                t0 = time.perf_counter()
+                render(Scenario(**{**BENCH_SCENARIO, **geometry}, render=RenderSettings(**RENDER)))
+                times.append(time.perf_counter() - t0)
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
+    return {
+        "near_field_s": near_field_s,
+        "cold_render_s": float(np.median(times)),
+        "cold_render_each_s": times,
+        "render": dict(RENDER),
     }
 
 
