@@ -38,6 +38,7 @@ from __future__ import annotations
 import json
 import math
 import resource
+import time
 from dataclasses import dataclass, replace
 
 import colour
@@ -122,6 +123,7 @@ def capture_frame(task: dict) -> CapturedFrame:
 
 def simulate_frame(task: dict) -> list[dict]:
     """Simulate one frame task (see module docstring) and score every detector on it."""
+    t0 = time.perf_counter()
     frame = capture_frame(task)
     scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
     truth_uv = marker_pixels(camera, scenario)
@@ -191,7 +193,8 @@ def simulate_frame(task: dict) -> list[dict]:
                     "blobs": len(tracked[tracker].blobs) if tracker in tracked else None,
                 }
             )
-    return rows
+    seconds = time.perf_counter() - t0
+    return [{**row, "frame_s": seconds} for row in rows]
 
 
 def _detect_options(task: dict, camera: Camera) -> dict:

@@ -54,8 +54,9 @@ Progress = Callable[[str, int, int], AbstractContextManager[Callable[[], None]]]
 manager whose value is called once per finished task. The command line passes a rich bar."""
 
 
-MACHINE_COLUMNS = ("worker_peak_rss_MiB",)
-"""Row fields that measure the machine a task ran on, not the task: logged to
+MACHINE_COLUMNS = ("worker_peak_rss_MiB", "frame_s")
+"""Row fields that measure the machine a task ran on, not the task (a worker's peak memory,
+MiB; a frame's wall time in its worker, s, its render included when it made one): logged to
 :data:`MACHINE_LOG`, never part of the rows :func:`run_tasks` returns."""
 
 MACHINE_LOG = "machine.csv"

@@ -55,7 +55,9 @@ def _rows(tasks, fresh: bool):
 
 
 def _without_rss(rows):
-    return [{k: v for k, v in r.items() if k != "worker_peak_rss_MiB"} for r in rows]
+    from studies.engine.runner import MACHINE_COLUMNS
+
+    return [{k: v for k, v in r.items() if k not in MACHINE_COLUMNS} for r in rows]
 
 
 def test_cold_and_warm_runs_in_any_order_agree(tmp_path, monkeypatch):
