@@ -13,6 +13,7 @@ once per marker configuration and cached.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import random
@@ -244,55 +245,61 @@ def warm_frames(per_study: int = 8, repeats: int = 2) -> dict:
 
 
 def cold_renders(geometries: int = 6) -> dict:
-    """A new diffuser configuration's near field, then renders of new geometries in one
-    process after its first render, with an empty render cache.
+    """Near fields of new diffuser configurations, then renders of new geometries after a
+    worker's first render, with empty caches: in a child process whose render cache and
+    Dr.Jit kernel cache (``$HOME/.drjit``) are new temporary folders.
 
-    ``near_field_s``: the exit-radiance and housing-leak renders of the bench marker
-    (V2 red, foam + 1 matched sheet) at the studies' near-field sampling, paid once per
-    configuration and colour. ``cold_render_s``: the median time to render a geometry
-    (a new range and yaw: new camera pose, new crop) once the process has rendered one,
-    as a study worker does for every pose after its first.
+    ``near_field_s``: the exit-radiance and housing-leak renders of the bench marker (V2
+    red) behind foam alone (six viewing angles, the studies' slowest configuration) at the
+    studies' near-field sampling, paid once per configuration and colour; ``near_fields``
+    also has foam + 1 matched sheet (one angle). ``cold_render_s``: the median time to
+    render a geometry (a new range and yaw: new camera pose, new crop) once the process has
+    rendered one, as a study worker does for every pose after its first; beside it the same
+    geometries through ``mitsuba.render`` (``reuse_kernels=False``, the previous path),
+    each geometry rendered by both paths in turn.
     """
-    saved = os.environ.get("BEACON_SIM_CACHE")
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
-            scenario = Scenario(**BENCH_SCENARIO, render=RenderSettings(**RENDER))
-            near = NearFieldSettings(spp=scenario.render.near_field_spp)
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "HOME": tmp, "BEACON_SIM_CACHE": str(Path(tmp) / "cache")}
+        code = (
+            "import json; from studies.experiments.bench import _cold_renders;"
+            f"print(json.dumps(_cold_renders({int(geometries)})))"
+        )
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=900)
+    if proc.returncode != 0:
+        raise RuntimeError(f"cold renders failed: {proc.stderr.strip()[-300:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _cold_renders(geometries: int) -> dict:
+    """:func:`cold_renders` in this process (its caches must be empty)."""
+    from scenes.assemble import scene_spec
+    from scenes.render import render_unit_groups
+
+    near_fields = {}
+    for label, foam, sheets in (("foam", True, 0), ("foam_1_matched", True, 1)):
+        scenario = Scenario(**{**BENCH_SCENARIO, "foam": foam, "paper_sheets": sheets}, render=RenderSettings(**RENDER))
+        near = NearFieldSettings(spp=scenario.render.near_field_spp)
+        args = (scenario.design, led_for_side(scenario.side), scenario.housing, scenario.diffuser, scenario.side)
+        t0 = time.perf_counter()
+        marker_emission(*args, settings=near)
+        housing_leak(*args, settings=near)
+        near_fields[label] = time.perf_counter() - t0
+    render(Scenario(**BENCH_SCENARIO, render=RenderSettings(**RENDER)))  # the worker's first render, untimed
+    times: dict[str, list[float]] = {"reuse": [], "mitsuba_render": []}
+    for k in range(geometries):
+        geometry = {"range_m": 3.0 + 0.9 * k, "yaw_deg": -25.0 + 10.0 * k}
+        scenario = Scenario(**{**BENCH_SCENARIO, **geometry}, render=RenderSettings(**RENDER))
+        for label, reuse in (("reuse", True), ("mitsuba_render", False)):
             t0 = time.perf_counter()
-            marker_emission(
-                scenario.design,
-                led_for_side(scenario.side),
-                scenario.housing,
-                scenario.diffuser,
-                scenario.side,
-                settings=near,
-            )
-            housing_leak(
-                scenario.design,
-                led_for_side(scenario.side),
-                scenario.housing,
-                scenario.diffuser,
-                scenario.side,
-                settings=near,
-            )
-            near_field_s = time.perf_counter() - t0
-            render(scenario)  # the worker's first render, untimed
-            times = []
-            for k in range(geometries):
-                geometry = {"range_m": 3.0 + 0.9 * k, "yaw_deg": -25.0 + 10.0 * k}
-                t0 = time.perf_counter()
-                render(Scenario(**{**BENCH_SCENARIO, **geometry}, render=RenderSettings(**RENDER)))
-                times.append(time.perf_counter() - t0)
-    finally:
-        if saved is None:
-            os.environ.pop("BEACON_SIM_CACHE", None)
-        else:
-            os.environ["BEACON_SIM_CACHE"] = saved
+            render_unit_groups(scene_spec(scenario), scenario.render.spp, scenario.render.seed, reuse_kernels=reuse)
+            times[label].append(time.perf_counter() - t0)
     return {
-        "near_field_s": near_field_s,
-        "cold_render_s": float(np.median(times)),
-        "cold_render_each_s": times,
+        "near_field_s": near_fields["foam"],
+        "near_fields": near_fields,
+        "cold_render_s": float(np.median(times["reuse"])),
+        "cold_render_mitsuba_render_s": float(np.median(times["mitsuba_render"])),
+        "ratio": float(np.median(times["mitsuba_render"]) / np.median(times["reuse"])),
+        "each_s": times,
         "render": dict(RENDER),
     }
 
@@ -366,7 +373,7 @@ def workers_and_dask(tasks: int = 12) -> dict:
     }
 
 
-def full_grid_estimate(batches: int = 12, seed: int = 0) -> dict:
+def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     """Time of the complete replication grid (:mod:`studies.catalog.replication`, full form) on
     this machine, extrapolated from a random sample of its render batches (a geometry
     with all its drives and seeds), run with 2 workers once with an empty render cache
