@@ -277,7 +277,8 @@ def bench(
     grid = details["full_grid_estimate"]
     t.add_row(
         f"replication grid ({grid['frames']:,} frames), extrapolated from {grid['sampled_batches']} render batches",
-        f"cold {grid['cold_h']:.1f} h, warm {grid['warm_h']:.1f} h",
+        f"cold {grid['cold_h']:.0f} h (95 %: {grid['cold_h_95'][0]:.0f}-{grid['cold_h_95'][1]:.0f} h), "
+        f"warm {grid['warm_h']:.0f} h",
         "≤ 5 h cold",
     )
     t.add_row("two-stage vs brute-force marker, equal 1 % RMS", f"{result['two_stage_vs_brute_force']:.0f}×", "≥ 100×")

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy import stats
 
 from camera_models.camera import load_camera
 from camera_models.capture import capture
@@ -413,6 +414,7 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
             t0 = time.perf_counter()
             run_frames(work, Path(tmp) / "warm", Execution(workers=2))
             warm = time.perf_counter() - t0
+            per_batch = _batch_seconds(Path(tmp) / "cold", groups)
     finally:
         if saved is None:
             os.environ.pop("BEACON_SIM_CACHE", None)
@@ -420,6 +422,11 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
             os.environ["BEACON_SIM_CACHE"] = saved
     scale = len(batch_geometry) / batches
     near_field_s = float(np.max(near_s)) * len(near_fields)  # the slowest as an upper bound per near field
+    # the sample's spread: batch times (frame seconds summed per batch, scaled so they add up
+    # to the measured wall time) give a Student-t 95 % interval of the mean batch
+    per_batch *= cold / per_batch.sum()
+    half = stats.t.ppf(0.975, batches - 1) * per_batch.std(ddof=1) / np.sqrt(batches)
+    cold_h_95 = [(max(per_batch.mean() + d, 0.0) * len(batch_geometry) + near_field_s) / 3600.0 for d in (-half, half)]
     return {
         "frames": len(geometries) * len(currents) * options.seeds,
         "render_batches": len(batch_geometry),
@@ -430,10 +437,26 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
         "near_fields": len(near_fields),
         "near_fields_s": near_field_s,
         "cold_h": (cold * scale + near_field_s) / 3600.0,
+        "cold_h_95": cold_h_95,
         "warm_h": warm * scale / 3600.0,
         "cold_ms_per_frame": 1e3 * cold / len(work),
         "warm_ms_per_frame": 1e3 * warm / len(work),
     }
+
+
+def _batch_seconds(out: Path, groups: dict[str, list[dict]]) -> np.ndarray:
+    """Seconds each render batch's frames took in their workers (``frame_s`` of
+    ``out/machine.csv``, summed per batch), in the order of ``groups``."""
+    import pandas as pd
+
+    from studies.engine.frame import FRAME_VERSION
+    from studies.engine.runner import MACHINE_LOG, task_key
+
+    log = pd.read_csv(out / MACHINE_LOG, dtype={"task": str})
+    seconds = log[(log.field == "frame_s") & (log.row == 0)].set_index("task").value.astype(float)
+    return np.array(
+        [sum(seconds[task_key(simulate_frame, t, FRAME_VERSION)[:16]] for t in tasks) for tasks in groups.values()]
+    )
 
 
 def variant_ratio() -> dict:
