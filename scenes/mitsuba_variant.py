@@ -156,6 +156,30 @@ def _decide_backend() -> tuple[str, str | None, str]:
 
     has_cuda = dr.has_backend(dr.JitBackend.CUDA)
     has_llvm = llvm_path is not None and dr.has_backend(dr.JitBackend.LLVM)
+    choice = choose_backend(override, has_cuda, has_llvm, llvm_msg, mi.variants())
+    if choice[0] == "scalar" and not override:
+        log.warning("Mitsuba: %s", choice[2])
+    return choice
+
+
+def choose_backend(
+    override: str, has_cuda: bool, has_llvm: bool, llvm_msg: str, variants: list[str]
+) -> tuple[str, str | None, str]:
+    """The backend to use, a variant forced by name (or None) and why: the override when
+    it names a usable backend or variant, else CUDA when a GPU is usable, else LLVM, else
+    scalar. Pure, so every branch (the GPU's included) is tested on any machine.
+
+    Parameters
+    ----------
+    override
+        ``BEACON_SIM_VARIANT`` (empty: none): a backend or a full variant name.
+    has_cuda, has_llvm
+        Whether Dr.Jit can use each backend here.
+    llvm_msg
+        Where libLLVM was found, or why it was not.
+    variants
+        Mitsuba's compiled variants.
+    """
     if override:
         backend = override.split("_")[0]
         if backend not in ("cuda", "llvm", "scalar"):
@@ -164,15 +188,13 @@ def _decide_backend() -> tuple[str, str | None, str]:
             raise RuntimeError(f"{ENV_OVERRIDE}={override}: LLVM backend unusable: {llvm_msg}")
         if backend == "cuda" and not has_cuda:
             raise RuntimeError(f"{ENV_OVERRIDE}={override}: no usable CUDA device")
-        forced = override if override in mi.variants() else None
+        forced = override if override in variants else None
         return backend, forced, f"forced by {ENV_OVERRIDE}={override}"
     if has_cuda:
         return "cuda", None, "a CUDA GPU is usable"
     if has_llvm:
         return "llvm", None, f"no CUDA GPU; LLVM backend through {llvm_msg}"
-    reason = f"no CUDA GPU and {llvm_msg}: falling back to the slow scalar variant"
-    log.warning("Mitsuba: %s", reason)
-    return "scalar", None, reason
+    return "scalar", None, f"no CUDA GPU and {llvm_msg}: falling back to the slow scalar variant"
 
 
 def active_variant() -> VariantChoice:

@@ -328,16 +328,29 @@ def _render_primal(scene: mi.Scene, seed: int, spp: int) -> mi.TensorXf:
         rgb = [value[0]] * 3 if mi.is_monochromatic else [value[0], value[1], value[2]]
         # ImageBlock::put() of a box filter: channels (R, G, B, W) at the pixel's index
         n_entries = width * height * n_channels
-        # the mode ReduceMode.Auto picks for the block (it decides the order of the sums)
-        if dr.backend_v(mi.Float) == dr.JitBackend.LLVM and n_entries <= dr.expand_threshold():
-            mode = dr.ReduceMode.Expand
-        else:
-            mode = dr.ReduceMode.Local if dr.flag(dr.JitFlag.ScatterReduceLocal) else dr.ReduceMode.Direct
+        mode = _block_reduce_mode(
+            dr.backend_v(mi.Float) == dr.JitBackend.LLVM,
+            n_entries,
+            dr.expand_threshold(),
+            dr.flag(dr.JitFlag.ScatterReduceLocal),
+        )
         block = dr.zeros(mi.Float, max(_MIN_BLOCK_ENTRIES, 1 << (n_entries - 1).bit_length()))
         dr.scatter_reduce(dr.ReduceOp.Add, block, mi.ArrayXf(*rgb, mi.Float(1.0)), pixel, True, mode)
         tensor = mi.TensorXf(dr.gather(mi.Float, block, dr.arange(mi.UInt32, n_entries)), (height, width, n_channels))
         film.put_block(mi.ImageBlock(tensor, film.crop_offset()))
         return film.develop()
+
+
+def _block_reduce_mode(llvm: bool, n_entries: int, expand_threshold: int, scatter_reduce_local: bool):
+    """The ``drjit.ReduceMode`` that ``ReduceMode.Auto`` picks for an image block of
+    ``n_entries`` floats (it decides the order of the sums, so the pixels' last bits): on
+    LLVM, ``Expand`` up to Dr.Jit's expand threshold; otherwise (CUDA, larger blocks)
+    ``Local`` when the ``ScatterReduceLocal`` flag is on, else ``Direct``."""
+    import drjit as dr
+
+    if llvm and n_entries <= expand_threshold:
+        return dr.ReduceMode.Expand
+    return dr.ReduceMode.Local if scatter_reduce_local else dr.ReduceMode.Direct
 
 
 def _set_crop(film: mi.Film, offset: mi.ScalarPoint2u, size: mi.ScalarVector2u) -> None:

@@ -53,3 +53,43 @@ def test_bad_override_is_one_line_error(monkeypatch):
     monkeypatch.delenv(mv.ENV_OVERRIDE)
     monkeypatch.setattr(mv, "_active", None)
     mv.select_variant("mono")
+
+
+@pytest.mark.parametrize(
+    ("override", "has_cuda", "has_llvm", "expected"),
+    [
+        ("", True, True, ("cuda", None)),  # a usable GPU wins: renders run there automatically
+        ("", True, False, ("cuda", None)),
+        ("", False, True, ("llvm", None)),
+        ("", False, False, ("scalar", None)),
+        ("llvm", True, True, ("llvm", None)),
+        ("cuda_ad_mono", True, False, ("cuda", "cuda_ad_mono")),
+        ("scalar", True, True, ("scalar", None)),
+    ],
+)
+def test_backend_choice(override, has_cuda, has_llvm, expected):
+    from scenes.mitsuba_variant import choose_backend
+
+    variants = ["scalar_rgb", "llvm_ad_mono", "cuda_ad_mono"]
+    backend, forced, reason = choose_backend(override, has_cuda, has_llvm, "libLLVM 19 at /x", variants)
+    assert (backend, forced) == expected and reason
+
+
+@pytest.mark.parametrize(("override", "error"), [("cuda", "no usable CUDA device"), ("llvm", "LLVM backend unusable")])
+def test_forcing_a_missing_backend_is_one_line_error(override, error):
+    from scenes.mitsuba_variant import choose_backend
+
+    with pytest.raises(RuntimeError, match=error):
+        choose_backend(override, False, False, "no libLLVM >= 16 found", [])
+
+
+def test_image_block_reduce_mode_follows_drjit_auto():
+    """The render loop's accumulation mode per backend (the CUDA branch checked here on a CPU)."""
+    import drjit as dr
+
+    from scenes.render import _block_reduce_mode
+
+    assert _block_reduce_mode(True, 4096, 1 << 20, True) == dr.ReduceMode.Expand
+    assert _block_reduce_mode(True, (1 << 20) + 1, 1 << 20, True) == dr.ReduceMode.Local
+    assert _block_reduce_mode(False, 4096, 1 << 20, True) == dr.ReduceMode.Local  # CUDA never expands
+    assert _block_reduce_mode(False, 4096, 1 << 20, False) == dr.ReduceMode.Direct
