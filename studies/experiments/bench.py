@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -279,12 +280,7 @@ def _cold_renders(geometries: int) -> dict:
     near_fields = {}
     for label, foam, sheets in (("foam", True, 0), ("foam_1_matched", True, 1)):
         scenario = Scenario(**{**BENCH_SCENARIO, "foam": foam, "paper_sheets": sheets}, render=RenderSettings(**RENDER))
-        near = NearFieldSettings(spp=scenario.render.near_field_spp)
-        args = (scenario.design, led_for_side(scenario.side), scenario.housing, scenario.diffuser, scenario.side)
-        t0 = time.perf_counter()
-        marker_emission(*args, settings=near)
-        housing_leak(*args, settings=near)
-        near_fields[label] = time.perf_counter() - t0
+        near_fields[label] = _near_field_seconds(scenario, scenario.side)
     render(Scenario(**BENCH_SCENARIO, render=RenderSettings(**RENDER)))  # the worker's first render, untimed
     times: dict[str, list[float]] = {"reuse": [], "mitsuba_render": []}
     for k in range(geometries):
@@ -303,6 +299,21 @@ def _cold_renders(geometries: int) -> dict:
         "each_s": times,
         "render": dict(RENDER),
     }
+
+
+@contextmanager
+def _temporary_render_cache():
+    """A new, empty render cache (``BEACON_SIM_CACHE``) for the block; yields its parent folder."""
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
+            yield Path(tmp)
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
 
 
 def _sweep_tasks(n: int, render_seed: int) -> list[dict]:
@@ -328,42 +339,32 @@ def workers_and_dask(tasks: int = 12) -> dict:
 
     from dask.distributed import LocalCluster
 
-    saved = os.environ.get("BEACON_SIM_CACHE")
     times = {}
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
-            warm = _sweep_tasks(1, 0)[0]
-            simulate_frame({**warm, "scenario": {**warm["scenario"], "range_m": 20.0}})  # near field, untimed
-            for k, label in enumerate(("workers_1", "workers_2", "dask_2", "workers_1_all_cores")):
-                work = _sweep_tasks(tasks, render_seed=1000 + k)
-                t0 = time.perf_counter()
-                if label == "dask_2":
-                    # `--scheduler ADDRESS` connects to a running cluster: its start-up is
-                    # timed apart, like the local pool's, whose processes start inside run_tasks
-                    with (
-                        worker_threads(2, 1),
-                        LocalCluster(
-                            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
-                        ) as cluster,
-                    ):
-                        times["dask_start"] = time.perf_counter() - t0
-                        t0 = time.perf_counter()
-                        run_tasks(work, Path(tmp) / label, simulate_frame, scheduler=cluster.scheduler_address)
-                        times[label] = time.perf_counter() - t0
-                    continue
-                elif label == "workers_1_all_cores":
-                    with worker_threads(1):
-                        run_tasks(work, Path(tmp) / label, simulate_frame, workers=1)
-                else:  # single-threaded worker processes, each task alone
-                    n = int(label[-1])
-                    run_tasks(work, Path(tmp) / label, simulate_frame, workers=n, threads_per_worker=1, isolated=True)
-                times[label] = time.perf_counter() - t0
-    finally:
-        if saved is None:
-            os.environ.pop("BEACON_SIM_CACHE", None)
-        else:
-            os.environ["BEACON_SIM_CACHE"] = saved
+    with _temporary_render_cache() as tmp:
+        warm = _sweep_tasks(1, 0)[0]
+        simulate_frame({**warm, "scenario": {**warm["scenario"], "range_m": 20.0}})  # near field, untimed
+        for k, label in enumerate(("workers_1", "workers_2", "dask_2", "workers_1_all_cores")):
+            work = _sweep_tasks(tasks, render_seed=1000 + k)
+            t0 = time.perf_counter()
+            if label == "dask_2":
+                # `--scheduler ADDRESS` connects to a running cluster: its start-up is
+                # timed apart, like the local pool's, whose processes start inside run_tasks
+                with (
+                    worker_threads(2, 1),
+                    LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+                ):
+                    times["dask_start"] = time.perf_counter() - t0
+                    t0 = time.perf_counter()
+                    run_tasks(work, Path(tmp) / label, simulate_frame, scheduler=cluster.scheduler_address)
+                    times[label] = time.perf_counter() - t0
+                continue
+            elif label == "workers_1_all_cores":
+                with worker_threads(1):
+                    run_tasks(work, Path(tmp) / label, simulate_frame, workers=1)
+            else:  # single-threaded worker processes, each task alone
+                n = int(label[-1])
+                run_tasks(work, Path(tmp) / label, simulate_frame, workers=n, threads_per_worker=1, isolated=True)
+            times[label] = time.perf_counter() - t0
     return {
         "tasks": tasks,
         **{f"{k}_s": v for k, v in times.items()},
@@ -398,23 +399,15 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
         groups[key] = [t for t in frame_tasks(drives, options, estimators=["best"]) if render_batch_key(t) == key]
     work = [t for key in sample for t in groups[key]]
     near_fields = {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
-    saved = os.environ.get("BEACON_SIM_CACHE")
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
-            near_s = [x for key in sample for x in _near_field_seconds(groups[key][0])]  # untimed in the batches
-            t0 = time.perf_counter()
-            run_frames(work, Path(tmp) / "cold", Execution(workers=2))
-            cold = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            run_frames(work, Path(tmp) / "warm", Execution(workers=2))
-            warm = time.perf_counter() - t0
-            per_batch = _batch_seconds(Path(tmp) / "cold", groups)
-    finally:
-        if saved is None:
-            os.environ.pop("BEACON_SIM_CACHE", None)
-        else:
-            os.environ["BEACON_SIM_CACHE"] = saved
+    with _temporary_render_cache() as tmp:
+        near_s = [x for key in sample for x in _task_near_field_seconds(groups[key][0])]  # untimed in the batches
+        t0 = time.perf_counter()
+        run_frames(work, Path(tmp) / "cold", Execution(workers=2))
+        cold = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        run_frames(work, Path(tmp) / "warm", Execution(workers=2))
+        warm = time.perf_counter() - t0
+        per_batch = _batch_seconds(Path(tmp) / "cold", groups)
     scale = len(batch_geometry) / batches
     near_field_s = float(np.mean(near_s)) * len(near_fields) if near_s else 0.0  # the sample's mean per near field
     # the sample's spread: batch times (frame seconds summed per batch, scaled so they add up
@@ -439,22 +432,25 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     }
 
 
-def _near_field_seconds(task: dict) -> list[float]:
-    """Seconds to compute each near field a frame task's render needs (exit radiance and
-    housing leak of every side's markers), leaving out those already computed."""
-    scenario = Scenario(**task["scenario"], render=RenderSettings(**task["render"]))
+def _near_field_seconds(scenario: Scenario, side: str) -> float | None:
+    """Seconds to compute the near fields of one side's markers in ``scenario`` (exit
+    radiance and housing leak, at the scenario's near-field sampling), or None when they
+    were already computed (cached)."""
+    args = (scenario.design, led_for_side(side), scenario.housing, scenario.diffuser, side)
     near = NearFieldSettings(spp=scenario.render.near_field_spp)
-    seconds = []
-    for side in SIDE_ANGLE_RAD:
-        args = (scenario.design, led_for_side(side), scenario.housing, scenario.diffuser, side)
-        before = STATS.renders
-        t0 = time.perf_counter()
-        if not scenario.diffuser.is_bare:
-            marker_emission(*args, settings=near)
-        housing_leak(*args, settings=near)
-        if STATS.renders > before:
-            seconds.append(time.perf_counter() - t0)
-    return seconds
+    before = STATS.renders
+    t0 = time.perf_counter()
+    if not scenario.diffuser.is_bare:
+        marker_emission(*args, settings=near)
+    housing_leak(*args, settings=near)
+    return time.perf_counter() - t0 if STATS.renders > before else None
+
+
+def _task_near_field_seconds(task: dict) -> list[float]:
+    """:func:`_near_field_seconds` of every side a frame task's render needs, leaving out cached ones."""
+    scenario = Scenario(**task["scenario"], render=RenderSettings(**task["render"]))
+    seconds = (_near_field_seconds(scenario, side) for side in SIDE_ANGLE_RAD)
+    return [x for x in seconds if x is not None]
 
 
 def _batch_seconds(out: Path, groups: dict[str, list[dict]]) -> np.ndarray:
