@@ -40,7 +40,7 @@ from scenes.beacon import SIDE_ANGLE_RAD, beacon_design
 from scenes.led import led_for_side
 from scenes.near_field import STATS, NearFieldSettings, housing_leak, marker_emission
 from scenes.render import render, with_led_current
-from scenes.render_cache import RenderCache
+from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
 from studies.catalog import replication
 from studies.engine.frame import render_batch_key, simulate_frame
@@ -375,6 +375,35 @@ def workers_and_dask(tasks: int = 12) -> dict:
     }
 
 
+def _grid_batches() -> tuple[list[dict], dict[str, dict]]:
+    """The complete replication grid's geometries (at its first drive) and its render
+    batches (a geometry and jittered pose with all its drives and seeds), keyed by
+    :func:`render_batch_key`."""
+    options = replication.default_options(quick=False)
+    geometries = [c for c in replication.conditions(options) if c["led_current_mA"] == options.currents_mA[0]]
+    # one task per geometry and jittered pose names every render batch of the grid (the
+    # jitter does not depend on the drive), without building all 2.15 M frame tasks
+    one_per_pose = replace(options, seeds=options.jitter_poses)
+    return geometries, {render_batch_key(t): g for g in geometries for t in frame_tasks([g], one_per_pose)}
+
+
+def _batch_tasks(keys: list[str], batch_geometry: dict[str, dict]) -> dict[str, list[dict]]:
+    """Each render batch's frame tasks: every drive and seed of its geometry and pose."""
+    options = replication.default_options(quick=False)
+    groups = {}
+    for key in keys:
+        drives = [{**batch_geometry[key], "led_current_mA": c} for c in options.currents_mA]
+        groups[key] = [t for t in frame_tasks(drives, options, estimators=["best"]) if render_batch_key(t) == key]
+    return groups
+
+
+def _grid_hours(per_batch_s: np.ndarray, n_batches: int, near_field_s: float) -> list[float]:
+    """Student-t 95 % interval, in hours, of a grid of ``n_batches`` render batches whose
+    batches take ``per_batch_s`` seconds as sampled, plus ``near_field_s``."""
+    half = stats.t.ppf(0.975, len(per_batch_s) - 1) * per_batch_s.std(ddof=1) / np.sqrt(len(per_batch_s))
+    return [(max(per_batch_s.mean() + d, 0.0) * n_batches + near_field_s) / 3600.0 for d in (-half, half)]
+
+
 def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     """Time of the complete replication grid (:mod:`studies.catalog.replication`, full form) on
     this machine, extrapolated from a random sample of its render batches (a geometry
@@ -386,17 +415,9 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     """
 
     options = replication.default_options(quick=False)
-    currents = options.currents_mA
-    # one task per geometry and jittered pose names every render batch of the grid (the
-    # jitter does not depend on the drive), without building all 2.15 M frame tasks
-    geometries = [c for c in replication.conditions(options) if c["led_current_mA"] == currents[0]]
-    one_per_pose = replace(options, seeds=options.jitter_poses)
-    batch_geometry = {render_batch_key(t): g for g in geometries for t in frame_tasks([g], one_per_pose)}
+    geometries, batch_geometry = _grid_batches()
     sample = random.Random(seed).sample(sorted(batch_geometry), batches)
-    groups = {}
-    for key in sample:  # the batch's frames: every drive and seed of its geometry and pose
-        drives = [{**batch_geometry[key], "led_current_mA": c} for c in currents]
-        groups[key] = [t for t in frame_tasks(drives, options, estimators=["best"]) if render_batch_key(t) == key]
+    groups = _batch_tasks(sample, batch_geometry)
     work = [t for key in sample for t in groups[key]]
     near_fields = {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
     with _temporary_render_cache() as tmp:
@@ -411,12 +432,10 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     scale = len(batch_geometry) / batches
     near_field_s = float(np.mean(near_s)) * len(near_fields) if near_s else 0.0  # the sample's mean per near field
     # the sample's spread: batch times (frame seconds summed per batch, scaled so they add up
-    # to the measured wall time) give a Student-t 95 % interval of the mean batch
+    # to the measured wall time) give the interval of the mean batch
     per_batch *= cold / per_batch.sum()
-    half = stats.t.ppf(0.975, batches - 1) * per_batch.std(ddof=1) / np.sqrt(batches)
-    cold_h_95 = [(max(per_batch.mean() + d, 0.0) * len(batch_geometry) + near_field_s) / 3600.0 for d in (-half, half)]
     return {
-        "frames": len(geometries) * len(currents) * options.seeds,
+        "frames": len(geometries) * len(options.currents_mA) * options.seeds,
         "render_batches": len(batch_geometry),
         "sampled_batches": batches,
         "sampled_frames": len(work),
@@ -425,11 +444,101 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
         "near_fields": len(near_fields),
         "near_fields_s": near_field_s,
         "cold_h": (cold * scale + near_field_s) / 3600.0,
-        "cold_h_95": cold_h_95,
+        "cold_h_95": _grid_hours(per_batch, len(batch_geometry), near_field_s),
         "warm_h": warm * scale / 3600.0,
         "cold_ms_per_frame": 1e3 * cold / len(work),
         "warm_ms_per_frame": 1e3 * warm / len(work),
     }
+
+
+def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Execution = Execution(workers=2)) -> dict:
+    """Run a random ``fraction`` of the replication grid's render batches cold and report
+    the measured time beside the grid's extrapolation from it.
+
+    Resumable: the frames, the render cache (``out/cache``, empty at the first start) and
+    each segment's wall time stay in ``out``; running again with the same arguments goes
+    on where an interrupted run stopped (a segment stopped by Ctrl-C counts up to that
+    moment; one killed outright is lost to ``frames_wall_s`` but not to
+    ``frames_worker_s``, the frames' own seconds in their workers). The near fields the
+    sample needs are computed first, each timed; the frames then run as ``execution``
+    says. The grid's cold time is extrapolated as (frame wall time) × (grid batches /
+    sampled batches) + (mean near field) × (the grid's near fields), with a Student-t 95 %
+    interval from the spread of the batches' frame seconds.
+
+    Parameters
+    ----------
+    out
+        Output folder; ``summary.json`` is written there once every frame is done.
+    fraction
+        Fraction of the grid's render batches, in (0, 1].
+    seed
+        Seed of the random choice of batches.
+    execution
+        Where the frames run (2 local workers by default, as the bench's other figures).
+
+    Returns
+    -------
+    dict
+        The summary (times in seconds and hours).
+    """
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction: expected a number in (0, 1], got {fraction!r}")
+    options = replication.default_options(quick=False)
+    geometries, batch_geometry = _grid_batches()
+    n = max(2, round(fraction * len(batch_geometry)))
+    sample = random.Random(seed).sample(sorted(batch_geometry), n)
+    out.mkdir(parents=True, exist_ok=True)
+    state_path = out / "segments.json"
+    state = json.loads(state_path.read_text()) if state_path.exists() else {"near_fields_s": [], "frames_wall_s": []}
+    if state.get("batches", sample) != sample:
+        raise ValueError(f"out: {out} holds a sample of other batches (fraction or seed differ); expected a new folder")
+    state["batches"] = sample
+    groups = _batch_tasks(sample, batch_geometry)
+    work = [t for key in sample for t in groups[key]]
+    saved = os.environ.get("BEACON_SIM_CACHE")
+    os.environ["BEACON_SIM_CACHE"] = str(out / "cache")
+    try:
+        for key in sample:  # near fields a batch needs and no earlier segment computed
+            state["near_fields_s"] += _task_near_field_seconds(groups[key][0])
+            atomic_write_bytes(state_path, json.dumps(state).encode())
+        t0 = time.perf_counter()
+        try:
+            run_frames(work, out / "frames", execution, description="grid sample")
+        finally:
+            state["frames_wall_s"].append(time.perf_counter() - t0)
+            atomic_write_bytes(state_path, json.dumps(state).encode())
+    finally:
+        if saved is None:
+            os.environ.pop("BEACON_SIM_CACHE", None)
+        else:
+            os.environ["BEACON_SIM_CACHE"] = saved
+    frames_s = float(sum(state["frames_wall_s"]))
+    near = state["near_fields_s"]
+    per_batch = _batch_seconds(out / "frames", groups)
+    worker_s = float(per_batch.sum())
+    per_batch *= frames_s / worker_s
+    grid_near_fields = len({(g["foam"], g["paper_sheets"], g["side"]) for g in geometries})
+    grid_near_s = float(np.mean(near)) * grid_near_fields if near else 0.0
+    summary = {
+        "fraction": fraction,
+        "seed": seed,
+        "workers": execution.workers,
+        "render_batches": n,
+        "frames": len(work),
+        "grid_render_batches": len(batch_geometry),
+        "grid_frames": len(geometries) * len(options.currents_mA) * options.seeds,
+        "measured_s": frames_s + float(sum(near)),
+        "frames_wall_s": frames_s,
+        "frames_worker_s": worker_s,
+        "segments": len(state["frames_wall_s"]),
+        "near_fields": len(near),
+        "near_fields_s": float(sum(near)),
+        "ms_per_frame": 1e3 * frames_s / len(work),
+        "grid_cold_h": (frames_s * len(batch_geometry) / n + grid_near_s) / 3600.0,
+        "grid_cold_h_95": _grid_hours(per_batch, len(batch_geometry), grid_near_s),
+    }
+    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
+    return summary
 
 
 def _near_field_seconds(scenario: Scenario, side: str) -> float | None:
