@@ -458,8 +458,7 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
     Resumable: the frames, the render cache (``out/cache``, empty at the first start) and
     each segment's wall time stay in ``out``; running again with the same arguments goes
     on where an interrupted run stopped (a segment stopped by Ctrl-C counts up to that
-    moment; one killed outright is lost to ``frames_wall_s`` but not to
-    ``frames_worker_s``, the frames' own seconds in their workers). The near fields the
+    moment, one killed outright up to its last finished frame, saved every 10 s). The near fields the
     sample needs are computed first, each timed; the frames then run as ``execution``
     says. The grid's cold time is extrapolated as (frame wall time) × (grid batches /
     sampled batches) + (mean near field) × (the grid's near fields), with a Student-t 95 %
@@ -501,11 +500,14 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
         for key in sample:  # near fields a batch needs and no earlier segment computed
             state["near_fields_s"] += _task_near_field_seconds(groups[key][0])
             atomic_write_bytes(state_path, json.dumps(state).encode())
+        state["frames_wall_s"].append(0.0)
+        atomic_write_bytes(state_path, json.dumps(state).encode())
         t0 = time.perf_counter()
         try:
-            run_frames(work, out / "frames", execution, description="grid sample")
+            timed = replace(execution, progress=_segment_clock(execution.progress, state, state_path, t0))
+            run_frames(work, out / "frames", timed, description="grid sample")
         finally:
-            state["frames_wall_s"].append(time.perf_counter() - t0)
+            state["frames_wall_s"][-1] = time.perf_counter() - t0
             atomic_write_bytes(state_path, json.dumps(state).encode())
     finally:
         if saved is None:
@@ -539,6 +541,29 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
     }
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
     return summary
+
+
+def _segment_clock(progress, state: dict, path: Path, t0: float, every_s: float = 10.0):
+    """``progress`` (a :data:`studies.engine.runner.Progress`) that also keeps the running
+    segment's wall time, up to its last finished task, in ``state["frames_wall_s"][-1]``
+    and saves ``state`` to ``path`` at most every ``every_s`` seconds."""
+
+    @contextmanager
+    def clocked(description: str, total: int, done: int):
+        saved = [time.perf_counter()]
+        with progress(description, total, done) as advance:
+
+            def step() -> None:
+                advance()
+                now = time.perf_counter()
+                state["frames_wall_s"][-1] = now - t0
+                if now - saved[0] >= every_s:
+                    atomic_write_bytes(path, json.dumps(state).encode())
+                    saved[0] = now
+
+            yield step
+
+    return clocked
 
 
 def _near_field_seconds(scenario: Scenario, side: str) -> float | None:

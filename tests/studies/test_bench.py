@@ -31,6 +31,8 @@ def test_grid_sample_resumes_and_extrapolates(tmp_path, monkeypatch):
     """With the frames and near fields replaced by fakes of known cost, the summary adds the
     segments up, counts each near field once and scales by the grid's batches; another
     fraction in the same folder is refused."""
+    import json
+
     import numpy as np
     import pytest
 
@@ -42,21 +44,26 @@ def test_grid_sample_resumes_and_extrapolates(tmp_path, monkeypatch):
     near = iter([[2.0, 4.0], [], [6.0]] + [[]] * 100)  # the second run finds them cached
     monkeypatch.setattr(bench, "_task_near_field_seconds", lambda task: next(near))
     monkeypatch.setattr(bench, "_batch_seconds", lambda out, groups: np.arange(1.0, len(groups) + 1))
-    walls = iter([0.25, 0.5])
+    walls = iter([0.25, 20.5])
     clock = {"t": 0.0}
+    on_disk = []
 
     def fake_run(work, out, execution, description):
-        clock["t"] += next(walls)
+        with execution.progress(description, len(work), 0) as advance:
+            clock["t"] += next(walls)
+            advance()  # a finished frame: the segment's time so far is saved (at most every 10 s)
+            on_disk.append(json.loads((tmp_path / "segments.json").read_text())["frames_wall_s"][-1])
 
     monkeypatch.setattr(bench, "run_frames", fake_run)
     monkeypatch.setattr(bench.time, "perf_counter", lambda: clock["t"])
     first = bench.grid_sample(tmp_path, 0.05)
     second = bench.grid_sample(tmp_path, 0.05)
     assert first["render_batches"] == 5 and first["frames"] == 20 and first["segments"] == 1
-    assert second["segments"] == 2 and second["frames_wall_s"] == pytest.approx(0.75)
+    assert second["segments"] == 2 and second["frames_wall_s"] == pytest.approx(20.75)
+    assert on_disk == [0.0, pytest.approx(20.5)]  # what a run killed after that frame would have kept
     assert second["near_fields"] == 3 and second["near_fields_s"] == pytest.approx(12.0)
     grid_near_fields = len({(g["foam"], g["paper_sheets"], g["side"]) for g in batches.values()})  # 6
-    expected_h = (0.75 * 100 / 5 + 4.0 * grid_near_fields) / 3600.0
+    expected_h = (20.75 * 100 / 5 + 4.0 * grid_near_fields) / 3600.0
     assert second["grid_cold_h"] == pytest.approx(expected_h)
     assert second["grid_cold_h_95"][0] < expected_h < second["grid_cold_h_95"][1]
     with pytest.raises(ValueError, match="other batches"):
