@@ -214,11 +214,15 @@ def bench(
             help="Instead: run this random fraction of the replication grid's render batches cold and "
             "extrapolate the grid from the measured time (0.01: ~21 500 frames, hours on 2 cores; "
             "resumes in --out).",
+            show_default="off: the full benchmark",
         ),
     ] = None,
-    out: opt.Out = Path("out/grid-sample"),
-    workers: opt.Workers = 2,
-    seed: opt.Seed = 0,
+    out: Annotated[
+        Path,
+        typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory of --grid-sample."),
+    ] = Path("out/grid-sample"),
+    workers: Annotated[int, typer.Option("--workers", help="Local worker processes of --grid-sample.")] = 2,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of --grid-sample's choice of render batches.")] = 0,
 ) -> None:
     """Measure speed-ups as ratios, side by side in one run on this machine."""
 
