@@ -67,6 +67,7 @@ WORK_FUNCTIONS = {
         "full_grid_estimate",
         "variant_ratio",
         "replication_tables",
+        "grid_sample",
     ],
 }
 """Functions that start real work (render, capture, sweep, experiment), by module."""
