@@ -304,11 +304,17 @@ def _cold_renders(geometries: int) -> dict:
 @contextmanager
 def _temporary_render_cache():
     """A new, empty render cache (``BEACON_SIM_CACHE``) for the block; yields its parent folder."""
+    with tempfile.TemporaryDirectory() as tmp, _render_cache_at(Path(tmp) / "cache"):
+        yield Path(tmp)
+
+
+@contextmanager
+def _render_cache_at(folder: Path):
+    """The render cache (``BEACON_SIM_CACHE``) in ``folder`` for the block, the previous one after."""
     saved = os.environ.get("BEACON_SIM_CACHE")
+    os.environ["BEACON_SIM_CACHE"] = str(folder)
     try:
-        with tempfile.TemporaryDirectory() as tmp:
-            os.environ["BEACON_SIM_CACHE"] = str(Path(tmp) / "cache")
-            yield Path(tmp)
+        yield
     finally:
         if saved is None:
             os.environ.pop("BEACON_SIM_CACHE", None)
@@ -387,6 +393,11 @@ def _grid_batches() -> tuple[list[dict], dict[str, dict]]:
     return geometries, {render_batch_key(t): g for g in geometries for t in frame_tasks([g], one_per_pose)}
 
 
+def _near_field_configs(geometries: list[dict]) -> set[tuple]:
+    """The near fields a grid's geometries need: one per diffuser configuration and side."""
+    return {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
+
+
 def _batch_tasks(keys: list[str], batch_geometry: dict[str, dict]) -> dict[str, list[dict]]:
     """Each render batch's frame tasks: every drive and seed of its geometry and pose."""
     options = replication.default_options(quick=False)
@@ -419,7 +430,7 @@ def full_grid_estimate(batches: int = 8, seed: int = 0) -> dict:
     sample = random.Random(seed).sample(sorted(batch_geometry), batches)
     groups = _batch_tasks(sample, batch_geometry)
     work = [t for key in sample for t in groups[key]]
-    near_fields = {(g["foam"], g["paper_sheets"], g["side"]) for g in geometries}
+    near_fields = _near_field_configs(geometries)
     with _temporary_render_cache() as tmp:
         near_s = [x for key in sample for x in _task_near_field_seconds(groups[key][0])]  # untimed in the batches
         t0 = time.perf_counter()
@@ -458,9 +469,9 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
     Resumable: the frames, the render cache (``out/cache``, empty at the first start) and
     each segment's wall time stay in ``out``; running again with the same arguments goes
     on where an interrupted run stopped (a segment stopped by Ctrl-C counts up to that
-    moment, one killed outright up to its last finished frame, saved every 10 s). The near fields the
-    sample needs are computed first, each timed; the frames then run as ``execution``
-    says. The grid's cold time is extrapolated as (frame wall time) × (grid batches /
+    moment, one killed outright up to its last finished frame, saved every 10 s). The
+    near fields the sample needs are computed first, each timed; the frames then run as
+    ``execution`` says. The grid's cold time is extrapolated as (frame wall time) × (grid batches /
     sampled batches) + (mean near field) × (the grid's near fields), with a Student-t 95 %
     interval from the spread of the batches' frame seconds.
 
@@ -494,9 +505,7 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
     state["batches"] = sample
     groups = _batch_tasks(sample, batch_geometry)
     work = [t for key in sample for t in groups[key]]
-    saved = os.environ.get("BEACON_SIM_CACHE")
-    os.environ["BEACON_SIM_CACHE"] = str(out / "cache")
-    try:
+    with _render_cache_at(out / "cache"):
         for key in sample:  # near fields a batch needs and no earlier segment computed
             state["near_fields_s"] += _task_near_field_seconds(groups[key][0])
             atomic_write_bytes(state_path, json.dumps(state).encode())
@@ -509,18 +518,12 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
         finally:
             state["frames_wall_s"][-1] = time.perf_counter() - t0
             atomic_write_bytes(state_path, json.dumps(state).encode())
-    finally:
-        if saved is None:
-            os.environ.pop("BEACON_SIM_CACHE", None)
-        else:
-            os.environ["BEACON_SIM_CACHE"] = saved
     frames_s = float(sum(state["frames_wall_s"]))
     near = state["near_fields_s"]
     per_batch = _batch_seconds(out / "frames", groups)
     worker_s = float(per_batch.sum())
     per_batch *= frames_s / worker_s
-    grid_near_fields = len({(g["foam"], g["paper_sheets"], g["side"]) for g in geometries})
-    grid_near_s = float(np.mean(near)) * grid_near_fields if near else 0.0
+    grid_near_s = float(np.mean(near)) * len(_near_field_configs(geometries)) if near else 0.0
     summary = {
         "fraction": fraction,
         "seed": seed,
