@@ -50,14 +50,12 @@ MORE_GEOMETRIES = [(-0.6, [10, 6, 38, 30]), (-0.7, [14, 8, 36, 31]), (-0.9, [4, 
 def one_thread():
     """Run Dr.Jit's LLVM backend on one thread for the test.
 
-    The backend splits a kernel's wavefront among its threads dynamically. When a split
-    falls inside a pixel's samples (small wavefronts, samples per pixel not a power of
-    two), that pixel's sum is formed in a different order depending on which thread took
-    which part, so its last bit depends on scheduling, for ``mitsuba.render`` as for the
-    reuse path (measured with spp 3 on a 36 × 31 crop while two busy loops shared the two
-    cores: 7 of 40 renders of each path differed from the other 33 by one ulp in a pixel;
-    spp 4, 16 and 1024 gave one result in 40). Same pixels are only defined for the same
-    summation order, so the comparison runs on one thread."""
+    The backend hands a kernel's work to its threads at run time, and the image block's
+    sums can depend on how the work fell: with spp 3 on a 36 × 31 crop, while two busy
+    loops shared the two cores, 7 of 40 ``mitsuba.render`` renders and 6 of 40 reuse-path
+    renders differed from the rest in a pixel's last bit (on one thread: one result in 60
+    renders of each path); spp 4, 16 and 1024 gave one result in 40. Same pixels are only defined
+    for the same summation order, so the comparison runs on one thread."""
     import drjit as dr
 
     threads = dr.thread_count()
