@@ -409,16 +409,16 @@ def housing_leak(
 def _cached(cache: RenderCache | None, key: str, name: str, label: str, render) -> tuple[NDArray[np.float64], bool]:
     """The array ``name`` stored under ``key``, or ``render()`` run, counted, logged and
     stored; and whether it came from the cache."""
-    cache = cache if cache is not None else RenderCache()
-    stored = cache.load(key)
-    if stored is not None:
-        return stored[name], True
-    t0 = time.perf_counter()
-    value = np.asarray(render(), dtype=np.float64)
-    STATS.renders += 1
-    log.info("%s in %.1f s", label, time.perf_counter() - t0)
-    cache.store(key, {name: value})
-    return value, False
+
+    def make() -> dict[str, NDArray[np.float64]]:
+        t0 = time.perf_counter()
+        value = np.asarray(render(), dtype=np.float64)
+        STATS.renders += 1
+        log.info("%s in %.1f s", label, time.perf_counter() - t0)
+        return {name: value}
+
+    stored, from_cache = (cache if cache is not None else RenderCache()).get_or_make(key, make)
+    return stored[name], from_cache
 
 
 def _render_leak(spec: dict, depth_m: float, settings: NearFieldSettings) -> float:

@@ -98,14 +98,14 @@ def render(
     if unknown:
         raise ValueError(f"groups: expected some of {available}, got unknown {sorted(unknown)}")
     key = render_key(scenario, variant, groups)
-    unit = cache.load(key) if cache is not None else None
-    from_cache = unit is not None
-    if unit is None:
+
+    def make() -> dict[str, np.ndarray]:
         t0 = time.perf_counter()
         unit = render_unit_groups(spec, scenario.render.spp, scenario.render.seed, groups)
         log.info("rendered %s in %.1f s (%s)", list(unit), time.perf_counter() - t0, variant)
-        if cache is not None:
-            cache.store(key, unit)
+        return unit
+
+    unit, from_cache = cache.get_or_make(key, make) if cache is not None else (make(), False)
     components = tuple(
         _scaled_component(scenario, group, image, f"{key}:{group}") for group, image in sorted(unit.items())
     )

@@ -5,16 +5,23 @@ SHA-256 of the payload followed by the payload (an ``.npz`` archive). Writes go 
 temporary file in the same directory, are flushed to disk and renamed into place, so a
 reader sees either nothing or a complete entry. A reader recomputes the digest; an
 entry that fails the check (truncated, bit-flipped) is deleted and reported as a miss.
+
+Processes that share the cache (a study's workers) make each entry once: the one that
+makes it holds an exclusive ``fcntl.flock`` on ``<key>.npz.lock`` beside the entry, and
+the others wait on that lock and then read the entry (:meth:`RenderCache.get_or_make`).
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import io
 import json
 import logging
 import os
 import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -90,6 +97,39 @@ class RenderCache:
             return None
         self.stats.hits += 1
         return arrays
+
+    def get_or_make(self, key: str, make: Callable[[], dict[str, np.ndarray]]) -> tuple[dict[str, np.ndarray], bool]:
+        """The arrays stored under ``key``, or ``make()``'s, stored; and whether they came
+        from the cache. While one process makes an entry, others asking for the same key
+        wait for it instead of making it again (two workers reaching a new diffuser
+        configuration together had both rendered its near field)."""
+        stored = self.load(key)
+        if stored is not None:
+            return stored, True
+        with self._making(key):
+            stored = self.load(key)  # made by another process while this one waited
+            if stored is not None:
+                return stored, True
+            arrays = make()
+            self.store(key, arrays)
+        return arrays, False
+
+    @contextmanager
+    def _making(self, key: str) -> Iterator[None]:
+        """Hold the exclusive lock on ``key``'s entry (none where the cache cannot be written)."""
+        path = self.path(key).with_suffix(".lock")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+        except OSError:
+            fd = None
+        try:
+            if fd is not None:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            if fd is not None:
+                os.close(fd)  # closing the only descriptor releases the lock
 
     def store(self, key: str, arrays: dict[str, np.ndarray]) -> Path | None:
         """Store ``arrays`` under ``key`` atomically; returns the entry's path, or ``None`` when

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import hashlib
+import threading
+import time
 
 import numpy as np
 import pytest
 
 from scenes.radiance_io import read_radiance_exr, write_radiance_exr
 from scenes.render import render, render_key
-from scenes.render_cache import RenderCache
+from scenes.render_cache import RenderCache, content_key
 from scenes.scenario import RenderSettings, Scenario
 
 pytestmark = pytest.mark.usefixtures("mitsuba_variant")
@@ -95,3 +97,36 @@ def test_with_led_current_equals_a_render_at_that_current():
     direct = render(Scenario(**{**SMALL.__dict__, "led_current_mA": 7.0}))
     rescaled = with_led_current(render(SMALL), 7.0)
     assert _digest(direct) == _digest(rescaled)
+
+
+def test_an_entry_being_made_is_waited_for_not_made_again(tmp_path):
+    # flock locks belong to open file descriptions, so two threads with their own open()
+    # exclude each other as two worker processes do
+    cache = RenderCache(tmp_path)
+    key = content_key("lock-test")
+    making, calls, first = threading.Event(), [], {}
+
+    def slow():
+        calls.append("slow")
+        making.set()
+        time.sleep(0.3)
+        return {"x": np.arange(3.0)}
+
+    def other():
+        calls.append("other")
+        return {"x": np.zeros(3)}
+
+    thread = threading.Thread(target=lambda: first.update(result=cache.get_or_make(key, slow)))
+    thread.start()
+    assert making.wait(10)
+    second, from_cache = cache.get_or_make(key, other)
+    thread.join()
+    assert calls == ["slow"] and from_cache and first["result"][1] is False
+    np.testing.assert_array_equal(second["x"], np.arange(3.0))
+
+
+def test_an_unwritable_cache_still_makes_the_entry(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("a file where the cache folder should be")
+    arrays, from_cache = RenderCache(blocker).get_or_make(content_key("x"), lambda: {"x": np.ones(2)})
+    assert not from_cache and arrays["x"].tolist() == [1.0, 1.0]
