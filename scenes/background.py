@@ -47,11 +47,11 @@ def render_background(
     spec["sensor"]["crop"] = [0, 0, grid.width, grid.height]
     seed = scenario.render.seed
     key = content_key("background", BACKGROUND_VERSION, RENDER_VERSION, variant, spec, spp, seed)
-    unit, from_cache = (
-        cache.get_or_make(key, lambda: render_unit_groups(spec, spp, seed))
-        if cache is not None
-        else (render_unit_groups(spec, spp, seed), False)
-    )
+
+    def make() -> dict:
+        return render_unit_groups(spec, spp, seed)
+
+    unit, from_cache = cache.get_or_make(key, make) if cache is not None else (make(), False)
     components = tuple(
         _scaled_component(scenario, group, image, f"{key}:{group}") for group, image in sorted(unit.items())
     )
