@@ -413,7 +413,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     verdict(
         "QUEST attitude degrades at longer range",
         bool(e5 > e1) if np.isfinite(e1) and np.isfinite(e5) else None,  # no detections at one end: no evidence
-        f"mean |yaw error| {e1:.2f}° at 1 m vs {e5:.2f}° at 5 m",
+        f"mean |yaw error| {_degrees(e1)} at 1 m vs {_degrees(e5)} at 5 m",
         "the attitude error does not grow with range among the detected frames",
         "blob-centroid bias of the erosion (fixed) grows relative to the shrinking marker spacing; more detections "
         "at 5 m would test it",
@@ -463,11 +463,27 @@ def _colour_reach_note(camera: str, sides, hsv: dict | None = None) -> str:
         if not ok:
             notes.append(f"the {camera} renders the {side} LED into its box at no exposure, highlight mode or paper")
             continue
-        spans = "; ".join(
-            f"highlight {hl}, {p} paper: {lo:.2g}-{hi:.2g}× the clip level" for (hl, p), (lo, hi) in ok.items()
+        words = _spans_in_words(ok, len(hits))
+        notes.append(
+            f"the {camera} renders the {side} LED into its box {'' if len(ok) == len(hits) else 'only '}at ({words})"
         )
-        notes.append(f"the {camera} renders the {side} LED into its box only at ({spans})")
     return "; ".join(notes) + " (`beacon-sim colour-reach`)"
+
+
+def _degrees(angle: float) -> str:
+    """An angle in degrees in words; NaN (no frame to average) as "no detection"."""
+    return f"{angle:.2f}°" if np.isfinite(angle) else "no detection"
+
+
+def _spans_in_words(spans: dict[tuple[str, str], tuple[float, float]], tried: int) -> str:
+    """Exposure spans (multiples of the clip level) per (highlight mode, paper), the settings
+    that share a span named together; "every setting" when all ``tried`` settings share it."""
+    by_span: dict[str, list[str]] = {}
+    for (highlight, paper), (lo, hi) in spans.items():
+        by_span.setdefault(f"{lo:.3g}-{hi:.3g}× the clip level", []).append(f"highlight {highlight}, {paper} paper")
+    return "; ".join(
+        f"{'every setting' if len(names) == tried else ' / '.join(names)}: {span}" for span, names in by_span.items()
+    )
 
 
 def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.DataFrame, calibrated: str) -> None:
@@ -492,7 +508,11 @@ def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.Data
         + "; ".join(f"{c}: {b}" for c, b in derived.items())
     )
     rep.heading("The study's conclusions")
-    rep.table(pd.DataFrame(verdicts), "Headline conclusions (docs/source-study.md §10) against the simulation")
+    rep.table(
+        pd.DataFrame(verdicts),
+        "Headline conclusions (docs/source-study.md §10) against the simulation",
+        css_class="answers",  # prose: left-aligned
+    )
     prim = table[table.test == "primary"]
     if len(prim):
         fig, axes = plt.subplots(1, 2, figsize=(11, 4))

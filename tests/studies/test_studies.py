@@ -276,3 +276,21 @@ def test_replication_max_range_fits_in_a_pool_equal_the_fits_in_process(tmp_path
     one, two = replication.max_range_table(frame, workers=1), replication.max_range_table(frame, workers=2)
     assert len(one) == 2 and np.all((one.max_range_m > 2) & (one.max_range_m < 9))  # one per drive
     pd.testing.assert_frame_equal(one, two, check_exact=True)
+
+
+def test_colour_reach_spans_in_words_group_equal_spans():
+    spans = {("clip", "matched"): (0.02, 200.0), ("clip", "white"): (0.02, 200.0), ("unclip", "white"): (20.0, 22.4)}
+    words = validate._spans_in_words(spans, tried=6)
+    assert words == (
+        "highlight clip, matched paper / highlight clip, white paper: 0.02-200× the clip level; "
+        "highlight unclip, white paper: 20-22.4× the clip level"
+    )
+    assert (
+        validate._spans_in_words({("clip", "white"): (0.02, 200.0)}, tried=1)
+        == "every setting: 0.02-200× the clip level"
+    )
+
+
+def test_degrees_in_words_say_no_detection_for_an_empty_mean():
+    assert validate._degrees(21.716) == "21.72°"
+    assert validate._degrees(float(pd.Series([], dtype=float).mean())) == "no detection"  # no frame detected
