@@ -40,7 +40,7 @@ from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
 from studies.catalog.unknowns_search import WEBCAMS, apply_point, calibrated_set
-from studies.engine.colour_reach import HIGHLIGHTS, reach
+from studies.engine.colour_reach import HIGHLIGHTS, LEVELS, reach
 from studies.engine.frame import capture_frame
 from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
@@ -475,12 +475,26 @@ def _degrees(angle: float) -> str:
     return f"{angle:.2f}°" if np.isfinite(angle) else "no detection"
 
 
-def _spans_in_words(spans: dict[tuple[str, str], tuple[float, float]], tried: int) -> str:
+_SPAN_WORDS = {
+    (True, True): "every exposure tried ({lo}-{hi}× the clip level)",
+    (True, False): "up to {hi}× the clip level (from the lowest tried, {lo}×)",
+    (False, True): "{lo}× the clip level and up (to the highest tried, {hi}×)",
+    (False, False): "{lo}-{hi}× the clip level",
+}
+"""An exposure span in words, by whether it reaches (lowest, highest) exposure tried."""
+
+
+def _spans_in_words(
+    spans: dict[tuple[str, str], tuple[float, float]], tried: int, levels: tuple[float, float] = (LEVELS[0], LEVELS[-1])
+) -> str:
     """Exposure spans (multiples of the clip level) per (highlight mode, paper), the settings
-    that share a span named together; "every setting" when all ``tried`` settings share it."""
+    that share a span named together; "every setting" when all ``tried`` settings share it.
+    A span that reaches an end of the exposures tried (``levels``: lowest, highest) says so,
+    since the box may hold beyond it."""
     by_span: dict[str, list[str]] = {}
     for (highlight, paper), (lo, hi) in spans.items():
-        by_span.setdefault(f"{lo:.3g}-{hi:.3g}× the clip level", []).append(f"highlight {highlight}, {paper} paper")
+        words = _SPAN_WORDS[lo <= levels[0], hi >= levels[1]].format(lo=f"{lo:.3g}", hi=f"{hi:.3g}")
+        by_span.setdefault(words, []).append(f"highlight {highlight}, {paper} paper")
     return "; ".join(
         f"{'every setting' if len(names) == tried else ' / '.join(names)}: {span}" for span, names in by_span.items()
     )

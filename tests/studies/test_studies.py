@@ -280,15 +280,26 @@ def test_replication_max_range_fits_in_a_pool_equal_the_fits_in_process(tmp_path
 
 def test_colour_reach_spans_in_words_group_equal_spans():
     spans = {("clip", "matched"): (0.02, 200.0), ("clip", "white"): (0.02, 200.0), ("unclip", "white"): (20.0, 22.4)}
-    words = validate._spans_in_words(spans, tried=6)
+    words = validate._spans_in_words(spans, tried=6, levels=(0.01, 300.0))  # spans inside the exposures tried
     assert words == (
         "highlight clip, matched paper / highlight clip, white paper: 0.02-200× the clip level; "
         "highlight unclip, white paper: 20-22.4× the clip level"
     )
-    assert (
-        validate._spans_in_words({("clip", "white"): (0.02, 200.0)}, tried=1)
-        == "every setting: 0.02-200× the clip level"
+    assert validate._spans_in_words({("clip", "white"): (0.02, 200.0)}, tried=1, levels=(0.01, 300.0)) == (
+        "every setting: 0.02-200× the clip level"
     )
+
+
+def test_colour_reach_spans_at_the_ends_of_the_exposures_tried_say_so():
+    ends = (0.02, 200.0)  # the lowest and highest exposure tried
+
+    def say(span):
+        return validate._spans_in_words({("clip", "white"): span}, tried=1, levels=ends)
+
+    assert say((0.02, 200.0)) == "every setting: every exposure tried (0.02-200× the clip level)"
+    assert say((0.02, 1.2)) == "every setting: up to 1.2× the clip level (from the lowest tried, 0.02×)"
+    assert say((20.0, 200.0)) == "every setting: 20× the clip level and up (to the highest tried, 200×)"
+    assert validate.LEVELS[0] == ends[0] and validate.LEVELS[-1] == ends[1]  # the default ends are the grid's
 
 
 def test_degrees_in_words_say_no_detection_for_an_empty_mean():
