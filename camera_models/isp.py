@@ -123,17 +123,22 @@ class ProcessedImage:
 
     Attributes
     ----------
-    rgb8
-        (rows, columns, 3) uint8 sRGB, RGB order.
+    bgr8
+        (rows, columns, 3) uint8 sRGB, BGR order (OpenCV's, which the JPEG encoder takes).
     jpeg
         The JPEG file's bytes.
     wb_gains
         White-balance gains used (R, G, B).
     """
 
-    rgb8: NDArray[np.uint8]
+    bgr8: NDArray[np.uint8]
     jpeg: bytes
     wb_gains: NDArray[np.float64]
+
+    @property
+    def rgb8(self) -> NDArray[np.uint8]:
+        """The same image in RGB order (a view)."""
+        return self.bgr8[..., ::-1]
 
 
 NLMEANS_TEMPLATE_PX = 7
@@ -183,47 +188,84 @@ def process(
     analog_gain
         Analog gain relative to base the frame was taken at (ISO / base ISO on a DSLR);
         needed only when the ISP's noise reduction is on, whose strength follows it.
+
+    Notes
+    -----
+    Every stage works on 16-bit BGR values with OpenCV (multi-threaded, saturating) and
+    tables, without float copies of the frame: raw → 16-bit linear by a table, bilinear
+    demosaic, white balance and clip (``clip``: a saturating multiply clips at the white
+    level exactly) and the colour matrix (``cv2.transform``, output clipped to [0, 1]), the
+    tone curve by one 65 536-entry table of 8-bit codes. Against the float32 path it
+    replaced, rounding to 16 bits moves a few codes by ±1 (tests/camera_models/test_isp_options.py).
     """
     s, isp = camera.sensor, camera.isp
     check_isp_options(camera)
     if isp.noise_reduction != "none" and (analog_gain is None or not np.isfinite(analog_gain) or analog_gain <= 0):
         raise ValueError(f"analog_gain: noise reduction needs the frame's analog gain (> 0), got {analog_gain!r}")
-    # 16-bit through the demosaic, then float32 in blocks of rows: a full T6 frame is 18 M pixels
     bgr16 = _demosaic_bgr16(_raw_to_16bit(s.black_level_DN, s.white_level_DN)[raw], s.cfa, x0, y0)
-    if isp.white_balance == "daylight":
-        gains = daylight_gains(camera)
-    elif isp.white_balance == "auto":
-        linear = raw.astype(np.float32)
-        linear -= np.float32(s.black_level_DN)
-        linear *= np.float32(1.0 / (s.white_level_DN - s.black_level_DN))
-        ch = cfa_channels(s.cfa, x0, y0, *raw.shape)
-        means = np.array([linear[ch == c].mean() for c in range(3)])
-        del linear
-        gains = auto_white_balance_gains(means, camera)
-    else:
-        raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
-    matrix_t = camera_to_srgb_matrix(camera).T.astype(np.float32)
-    gains32 = np.asarray(gains, dtype=np.float32)
-    lut = None if isp.tone_curve == "srgb" else _tone_lut(isp.tone_curve, float(isp.tone_contrast))
-    rgb8 = np.empty(bgr16.shape, dtype=np.uint8)
-    for r0 in range(0, bgr16.shape[0], 256):
-        block = bgr16[r0 : r0 + 256, :, ::-1].astype(np.float32, order="C")
-        block *= np.float32(1.0 / 65535.0)
-        block *= gains32
-        if isp.highlight == "clip":
-            np.clip(block, 0.0, 1.0, out=block)
-        elif isp.highlight == "blend":
-            blend_highlights(block, 1.0)
-        # "unclip": values above 1 go through the matrix; the tone curve clips the output
-        out = block @ matrix_t
-        rgb8[r0 : r0 + 256] = srgb_encode_8bit(out) if lut is None else _apply_tone_lut(out, lut)
+    gains = white_balance_gains(raw, camera, x0, y0)
+    matrix = camera_to_srgb_matrix(camera)
+    # white balance and colour matrix as one transform; the few pixels that white balance takes
+    # past the white level are re-made after it by the highlight mode (clip or blend)
+    to_bgr = np.eye(3)[::-1]  # RGB <-> BGR
+    out16 = cv2.transform(bgr16, to_bgr @ matrix @ np.diag(gains) @ to_bgr)
+    if isp.highlight != "unclip":  # unclip: values above 1 go through the matrix; the output is clipped
+        _redo_highlights(out16, bgr16, gains, matrix, isp.highlight)
     del bgr16
+    bgr8 = _encode_lut(isp.tone_curve, float(isp.tone_contrast))[out16]
+    del out16
     if isp.noise_reduction != "none":
         luma_h, chroma_h = noise_reduction_strength(camera, analog_gain)
-        rgb8 = reduce_noise(rgb8, luma_h, chroma_h)
+        bgr8 = _reduce_noise_bgr(bgr8, luma_h, chroma_h)
     if isp.sharpening_amount > 0.0:
-        rgb8 = unsharp_mask(rgb8, isp.sharpening_amount, isp.sharpening_sigma_px)
-    return ProcessedImage(rgb8, encode_jpeg(rgb8, camera), gains)
+        bgr8 = _unsharp_mask_bgr(bgr8, isp.sharpening_amount, isp.sharpening_sigma_px)
+    return ProcessedImage(bgr8, encode_jpeg_bgr(bgr8, camera), gains)
+
+
+def white_balance_gains(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:
+    """The ISP's white-balance gains (R, G, B) for a raw mosaic: the body's daylight gains, or
+    grey-world gains from the mosaic's mean linear value per colour filter (``auto``)."""
+    s, isp = camera.sensor, camera.isp
+    if isp.white_balance == "daylight":
+        return daylight_gains(camera)
+    if isp.white_balance != "auto":
+        raise ValueError(f"isp.white_balance: expected daylight or auto, got {isp.white_balance!r}")
+    ch = cfa_channels(s.cfa, x0, y0, 2, 2)
+    sums, counts = np.zeros(3), np.zeros(3)
+    for dy in range(2):
+        for dx in range(2):
+            site = raw[dy::2, dx::2]
+            sums[ch[dy, dx]] += float(site.sum(dtype=np.float64))
+            counts[ch[dy, dx]] += site.size
+    means = (sums / np.maximum(counts, 1) - s.black_level_DN) / (s.white_level_DN - s.black_level_DN)
+    return auto_white_balance_gains(means, camera)
+
+
+def _redo_highlights(out16, bgr16, gains, matrix, mode: str) -> None:
+    """Re-make, in place, the output (16-bit linear sRGB, BGR) of the pixels with a channel that
+    white balance takes past the white level: clipped per channel (``clip``) or blended
+    (``blend``, :func:`blend_highlights`) before the matrix. Other pixels need neither."""
+    limits = tuple(min(65535.0 / float(g), 65535.0) for g in gains[::-1])
+    below = cv2.inRange(bgr16, (0.0, 0.0, 0.0), limits)  # 255 where no channel passes the white level
+    hot = np.flatnonzero(below.ravel() == 0)
+    if not hot.size:
+        return
+    rgb = bgr16.reshape(-1, 3)[hot][:, ::-1].astype(np.float64) * (gains / 65535.0)
+    if mode == "clip":
+        np.clip(rgb, 0.0, 1.0, out=rgb)
+    else:
+        rgb = blend_highlights(rgb.astype(np.float32), 1.0).astype(np.float64)
+    linear = np.clip(rgb @ matrix.T, 0.0, 1.0)
+    out16.reshape(-1, 3)[hot] = np.rint(linear[:, ::-1] * 65535.0).astype(np.uint16)
+
+
+@lru_cache(maxsize=8)
+def _encode_lut(name: str, contrast: float) -> NDArray[np.uint8]:
+    """8-bit code of each 16-bit linear value k / 65535 under the named tone curve (65 536 entries)."""
+    x = np.arange(1 << 16, dtype=np.float64) / 65535.0
+    if name == "srgb":
+        return srgb_encode_8bit(x)
+    return np.rint(tone_curve(x, name, contrast) * 255.0).astype(np.uint8)
 
 
 def blend_highlights(rgb: NDArray[np.float32], clip: float = 1.0) -> NDArray[np.float32]:
@@ -267,21 +309,6 @@ def tone_curve(linear: NDArray[np.float64], name: str = "srgb", contrast: float 
     raise ValueError(f"isp.tone_curve: expected one of {', '.join(TONE_CURVES)}, got {name!r}")
 
 
-_TONE_LUT_STEPS = 1 << 16
-
-
-@lru_cache(maxsize=8)
-def _tone_lut(name: str, contrast: float) -> NDArray[np.uint8]:
-    """8-bit codes of the tone curve at linear values k / 2¹⁶, k = 0…2¹⁶ (≤ 0.05 code per step)."""
-    x = np.arange(_TONE_LUT_STEPS + 1) / _TONE_LUT_STEPS
-    return np.rint(tone_curve(x, name, contrast) * 255.0).astype(np.uint8)
-
-
-def _apply_tone_lut(linear: NDArray[np.float32], lut: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    x = np.clip(linear, 0.0, 1.0, out=linear)
-    return lut[np.rint(x * _TONE_LUT_STEPS).astype(np.int32)]
-
-
 def noise_reduction_strength(camera: Camera, analog_gain: float) -> tuple[float, float]:
     """(luma h, chroma hColor) of the non-local means filter at an analog gain, 8-bit code units.
 
@@ -300,20 +327,26 @@ def reduce_noise(rgb8: NDArray[np.uint8], luma_h: float, chroma_h: float) -> NDA
     ``luma_h`` and a, b with ``hColor`` = ``chroma_h`` (8-bit code units; larger removes
     more noise and more detail), patch 7 px, search window 21 px.
     """
-    bgr = np.ascontiguousarray(rgb8[..., ::-1])
-    out = cv2.fastNlMeansDenoisingColored(
-        bgr, None, float(luma_h), float(chroma_h), NLMEANS_TEMPLATE_PX, NLMEANS_SEARCH_PX
+    return np.ascontiguousarray(_reduce_noise_bgr(np.ascontiguousarray(rgb8[..., ::-1]), luma_h, chroma_h)[..., ::-1])
+
+
+def _reduce_noise_bgr(bgr8: NDArray[np.uint8], luma_h: float, chroma_h: float) -> NDArray[np.uint8]:
+    return cv2.fastNlMeansDenoisingColored(
+        bgr8, None, float(luma_h), float(chroma_h), NLMEANS_TEMPLATE_PX, NLMEANS_SEARCH_PX
     )
-    return np.ascontiguousarray(out[..., ::-1])
 
 
 def unsharp_mask(rgb8: NDArray[np.uint8], amount: float, sigma_px: float) -> NDArray[np.uint8]:
     """Unsharp mask on luma: Y + amount·(Y − Gaussian(Y, sigma_px)) in YCbCr, chroma untouched (uint8 RGB)."""
-    ycc = cv2.cvtColor(np.ascontiguousarray(rgb8), cv2.COLOR_RGB2YCrCb)
+    return np.ascontiguousarray(_unsharp_mask_bgr(np.ascontiguousarray(rgb8[..., ::-1]), amount, sigma_px)[..., ::-1])
+
+
+def _unsharp_mask_bgr(bgr8: NDArray[np.uint8], amount: float, sigma_px: float) -> NDArray[np.uint8]:
+    ycc = cv2.cvtColor(bgr8, cv2.COLOR_BGR2YCrCb)
     y = np.ascontiguousarray(ycc[..., 0])
     blurred = cv2.GaussianBlur(y, (0, 0), float(sigma_px))
     ycc[..., 0] = cv2.addWeighted(y, 1.0 + float(amount), blurred, -float(amount), 0.0)
-    return cv2.cvtColor(ycc, cv2.COLOR_YCrCb2RGB)
+    return cv2.cvtColor(ycc, cv2.COLOR_YCrCb2BGR)
 
 
 _LUT_BITS = 16
@@ -362,7 +395,12 @@ def srgb_encode_8bit(linear: NDArray[np.float64]) -> NDArray[np.uint8]:
 
 
 def encode_jpeg(rgb8: NDArray[np.uint8], camera: Camera) -> bytes:
-    """JPEG bytes at the camera's quality and chroma subsampling."""
+    """JPEG bytes of an RGB image at the camera's quality and chroma subsampling."""
+    return encode_jpeg_bgr(np.ascontiguousarray(rgb8[..., ::-1]), camera)
+
+
+def encode_jpeg_bgr(bgr8: NDArray[np.uint8], camera: Camera) -> bytes:
+    """JPEG bytes of a BGR image (OpenCV's order: no copy) at the camera's quality and chroma subsampling."""
     if camera.isp.chroma_subsampling not in SUBSAMPLING_FLAGS:
         raise ValueError(
             f"isp.chroma_subsampling: expected one of {', '.join(SUBSAMPLING_FLAGS)}, "
@@ -374,7 +412,7 @@ def encode_jpeg(rgb8: NDArray[np.uint8], camera: Camera) -> bytes:
         cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
         SUBSAMPLING_FLAGS[camera.isp.chroma_subsampling],
     ]
-    ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(rgb8[..., ::-1]), params)
+    ok, buf = cv2.imencode(".jpg", bgr8, params)
     if not ok:
         raise RuntimeError("jpeg: OpenCV could not encode the image")
     return buf.tobytes()

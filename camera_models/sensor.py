@@ -107,18 +107,39 @@ def bloom(electrons: NDArray[np.float64], full_well_e: float, fraction: float, p
     crop's edge is lost. Returns a new float32 array (e⁻).
     """
     e = electrons.astype(np.float32, copy=True)
+    bloom_in_place(e, full_well_e, fraction, passes)
+    return e
+
+
+def bloom_in_place(e: NDArray[np.float32], full_well_e: float, fraction: float, passes: int = 8) -> None:
+    """:func:`bloom` on a float32 array in place, computed only in the window that can change.
+
+    Charge moves one pixel per pass, so only pixels within ``passes`` of one above the
+    well can change: the spill is computed in that window (the pixels' bounding box grown
+    by ``passes`` + 1, cut at the frame's edges), which gives the same values as the whole
+    array and costs nothing when no well is full (one read of the array).
+    """
     well = np.float32(full_well_e)
+    if not e.max(initial=-np.inf) > well:  # most frames never fill a well
+        return
+    hot = e > well
+    rows = np.flatnonzero(hot.any(axis=1))
+    cols = np.flatnonzero(hot.any(axis=0))
+    reach = passes + 1
+    r0, r1 = max(rows[0] - reach, 0), min(rows[-1] + reach + 1, e.shape[0])
+    c0, c1 = max(cols[0] - reach, 0), min(cols[-1] + reach + 1, e.shape[1])
+    window = e[r0:r1, c0:c1]  # a view: the spill below writes into ``e``
     for _ in range(passes):
-        if not e.max(initial=-np.inf) > well:  # one read, no temporary: most frames never fill a well
-            return e
-        excess = np.clip(e - full_well_e, 0.0, None)
-        e -= excess
+        if not window.max(initial=-np.inf) > well:
+            return
+        excess = np.clip(window - full_well_e, 0.0, None)
+        window -= excess
         share = excess * (fraction / 4.0)
-        e[1:, :] += share[:-1, :]
-        e[:-1, :] += share[1:, :]
-        e[:, 1:] += share[:, :-1]
-        e[:, :-1] += share[:, 1:]
-    return np.minimum(e, full_well_e, out=e)
+        window[1:, :] += share[:-1, :]
+        window[:-1, :] += share[1:, :]
+        window[:, 1:] += share[:, :-1]
+        window[:, :-1] += share[:, 1:]
+    np.minimum(window, full_well_e, out=window)
 
 
 _ROWS = 256
@@ -149,7 +170,7 @@ def _pixel_patterns_of(
     return gain, dark, offset
 
 
-def expose(
+def expose_numpy(
     mean_electrons: NDArray[np.float64],
     sensor: SensorModel,
     settings: SensorSettings,
@@ -157,7 +178,10 @@ def expose(
     x0: int = 0,
     y0: int = 0,
 ) -> NDArray[np.uint16]:
-    """Raw frame (DN, uint16) from the mean photo-electrons of each pixel.
+    """Raw frame (DN, uint16) from the mean photo-electrons of each pixel, by numpy: the
+    reference implementation of the model, step by step as the module docstring lists them
+    (two read-noise draws, numpy's Poisson sampler), and the path where Dr.Jit has no fast
+    backend.
 
     Parameters
     ----------
@@ -193,7 +217,7 @@ def expose(
         mu *= gain_fp[r]
         mu += dark_fp[r] * dark_e
         electrons[r] = rng.poisson(mu)
-    electrons = bloom(electrons, sensor.full_well_e, sensor.blooming_fraction)
+    bloom_in_place(electrons, sensor.full_well_e, sensor.blooming_fraction)
     pre, post = sensor.read_noise_split()
     for r in _blocks(h):
         electrons[r] += rng.standard_normal(electrons[r].shape, dtype=f32) * f32(pre)
@@ -218,6 +242,71 @@ def expose(
 
 def _blocks(rows: int) -> list[slice]:
     return [slice(r0, min(r0 + _ROWS, rows)) for r0 in range(0, rows, _ROWS)]
+
+
+def _expose_drjit(*args, **kwargs) -> NDArray[np.uint16]:
+    from camera_models.sensor_kernel import expose_drjit  # imports Dr.Jit: only when used
+
+    return expose_drjit(*args, **kwargs)
+
+
+SENSOR_PATHS = {"drjit": _expose_drjit, "numpy": expose_numpy}
+"""The implementations of the sensor model: ``drjit`` (fused kernels,
+:mod:`camera_models.sensor_kernel`) and ``numpy`` (the step-by-step reference). They draw from
+the same distributions (tests/camera_models/test_sensor_equivalence.py), not the same numbers."""
+
+
+def default_sensor_path() -> str:
+    """``drjit`` where Dr.Jit has a fast backend (LLVM or CUDA), else ``numpy`` (logged once)."""
+    from camera_models.sensor_kernel import available
+
+    if available():
+        return "drjit"
+    _log_numpy_fallback()
+    return "numpy"
+
+
+@lru_cache(maxsize=1)
+def _log_numpy_fallback() -> None:
+    import logging
+
+    logging.getLogger("beacon_sim").warning(
+        "sensor: no fast Dr.Jit backend (libLLVM >= 16 or CUDA); using the slower numpy sensor path"
+    )
+
+
+def expose(
+    mean_electrons: NDArray[np.float64],
+    sensor: SensorModel,
+    settings: SensorSettings,
+    seed: int,
+    x0: int = 0,
+    y0: int = 0,
+    *,
+    path: str | None = None,
+) -> NDArray[np.uint16]:
+    """Raw frame (DN, uint16) from the mean photo-electrons of each pixel.
+
+    Parameters
+    ----------
+    mean_electrons
+        (rows, columns) mean photo-electrons of each pixel behind its own colour filter
+        (use :func:`mosaic` to pick them from per-channel images), e⁻.
+    sensor
+        Sensor parameters.
+    settings
+        Exposure time and analog gain.
+    seed
+        Seed of the temporal noise (same seed and path → same bytes).
+    x0, y0
+        Frame position of the crop's top-left pixel (for the fixed pattern).
+    path
+        A key of :data:`SENSOR_PATHS`; default :func:`default_sensor_path`.
+    """
+    key = default_sensor_path() if path is None else path
+    if key not in SENSOR_PATHS:
+        raise ValueError(f"path: expected one of {', '.join(SENSOR_PATHS)}, got {path!r}")
+    return SENSOR_PATHS[key](mean_electrons, sensor, settings, seed, x0, y0)
 
 
 def mosaic(rgb: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:

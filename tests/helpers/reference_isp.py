@@ -1,0 +1,33 @@
+"""The ISP as it was computed before issue 24, in float: the reference the 16-bit OpenCV path is held to.
+
+demosaic (float, :func:`camera_models.isp.demosaic`) → × white-balance gains → highlight
+mode (clip, unclip, blend) → camera RGB to linear sRGB → tone curve → 8-bit codes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from camera_models.isp import blend_highlights, camera_to_srgb_matrix, demosaic, srgb_encode_8bit, tone_curve
+
+__all__ = ["reference_rgb8"]
+
+
+def reference_rgb8(raw: np.ndarray, camera, x0: int = 0, y0: int = 0, gains: np.ndarray | None = None) -> np.ndarray:
+    """8-bit RGB of a raw mosaic by the float path (noise reduction and sharpening off)."""
+    from camera_models.isp import white_balance_gains
+
+    s, isp = camera.sensor, camera.isp
+    linear = (raw.astype(np.float32) - np.float32(s.black_level_DN)) * np.float32(
+        1.0 / (s.white_level_DN - s.black_level_DN)
+    )
+    g = white_balance_gains(raw, camera, x0, y0) if gains is None else gains
+    rgb = demosaic(linear, s.cfa, x0, y0) * g.astype(np.float32)
+    if isp.highlight == "clip":
+        rgb = np.clip(rgb, 0.0, 1.0)
+    elif isp.highlight == "blend":
+        blend_highlights(rgb, 1.0)
+    out = rgb.astype(np.float64) @ camera_to_srgb_matrix(camera).T
+    if isp.tone_curve == "srgb":
+        return srgb_encode_8bit(out)
+    return np.rint(tone_curve(out, isp.tone_curve, isp.tone_contrast) * 255.0).astype(np.uint8)
