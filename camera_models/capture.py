@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from camera_models.camera import Camera
 from camera_models.exposure import ExposureSettings, auto_exposure, manual_exposure
 from camera_models.isp import ProcessedImage, process
+from camera_models.isp_reference import reference_process
 from camera_models.optics import (
     RadialMapping,
     camera_equation_factor_m2_sr,
@@ -170,6 +171,7 @@ def capture(
     full: bool = True,
     *,
     noise: bool = True,
+    reference: bool = False,
 ) -> Capture:
     """Simulate the frame the camera records for a render.
 
@@ -191,6 +193,10 @@ def capture(
         Produce the full frame (else only the crop).
     noise
         Sensor noise on (default); False gives the noiseless raw (:func:`noiseless_raw`), for checks.
+    reference
+        Use the reference implementations the fast path replaced (numpy sensor,
+        :func:`camera_models.sensor.expose_numpy`; float ISP, :mod:`camera_models.isp_reference`):
+        the same distributions, other random numbers; for equivalence tests and the benchmark.
     """
     if not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
@@ -210,9 +216,15 @@ def capture(
         x0, y0 = opt.x0, opt.y0
         mean = mosaic(opt.electrons_rgb * t, camera.sensor.cfa, x0, y0)
     settings = SensorSettings(t, exposure.analog_gain)
-    raw = expose(mean, camera.sensor, settings, seed, x0, y0) if noise else noiseless_raw(mean, camera, settings)
+    if not noise:
+        raw = noiseless_raw(mean, camera, settings)
+    else:
+        raw = expose(mean, camera.sensor, settings, seed, x0, y0, path="numpy" if reference else None)
     clip = min(camera.sensor.white_level_DN, 2**camera.sensor.adc_bits - 1)
-    image = process(raw, camera, x0, y0, analog_gain=exposure.analog_gain)
+    if reference:
+        image = reference_process(raw, camera, x0, y0)
+    else:
+        image = process(raw, camera, x0, y0, analog_gain=exposure.analog_gain)
     return Capture(raw, image, exposure, x0, y0, float(np.mean(raw >= clip)))
 
 

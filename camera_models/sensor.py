@@ -14,8 +14,11 @@ For each pixel (channel c set by the CFA, full-frame parity):
 
 Fixed-pattern noise is a property of the sensor: it comes from a counter-based hash of
 (pixel column, pixel row, the body's ``fixed_pattern_seed``), so any crop of the frame
-sees the same pattern. Temporal noise comes from ``numpy.random.Generator(PCG64(seed))``;
-the same seed gives the same bytes.
+sees the same pattern. Two implementations draw the temporal noise (:data:`SENSOR_PATHS`): fused Dr.Jit kernels
+(:mod:`camera_models.sensor_kernel`, the default where Dr.Jit has its LLVM or CUDA backend)
+and numpy (:func:`expose_numpy`, ``numpy.random.Generator(PCG64(seed))``, the step-by-step
+reference). They draw from the same distributions (tests/camera_models/test_sensor_equivalence.py),
+not the same numbers; each gives the same bytes for the same seed.
 """
 
 from __future__ import annotations

@@ -16,6 +16,8 @@ worker process or a Dask cluster):
                ISP and JPEG on every pixel, so the detectors see the false blobs the camera makes
 ``noise``      optional, default True; False captures the noiseless frame (no temporal or fixed-
                pattern sensor noise: :func:`camera_models.capture.capture`), for checks
+``reference_camera``  optional, default False; True captures with the reference sensor and ISP the
+               fast path replaced (same distributions, other numbers), for equivalence tests
 ``quest_weights``  optional ``tuned`` (default, the study's) or ``equal`` QUEST weights
 ``rectification``  optional ``{"alpha": 0 or 1}``: undistort before detecting, as the study's
                rectification did (ideal calibration: :mod:`camera_models.rectification`)
@@ -62,12 +64,14 @@ from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
-FRAME_VERSION = 4
+FRAME_VERSION = 5
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.
 4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
 and ``blobs`` (every blob the tracker found); ``align_px`` is ignored on whole frames, and an aligned
-crop's unit render is padded with it (it was not: the lens saw the render shifted by the padding)."""
+crop's unit render is padded with it (it was not: the lens saw the render shifted by the padding).
+5: the sensor's noise from the Dr.Jit kernels and the ISP on 16-bit values (issue 24: new random
+streams, the same distributions)."""
 
 
 def frame_scenario(task: dict):
@@ -116,6 +120,7 @@ def capture_frame(task: dict) -> CapturedFrame:
         f_number=settings.get("f_number"),
         full=bool(task.get("full_frame")),
         noise=bool(task.get("noise", True)),
+        reference=bool(task.get("reference_camera")),
     )
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)

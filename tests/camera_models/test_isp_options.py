@@ -20,8 +20,8 @@ from camera_models.isp import (
     tone_curve,
     unsharp_mask,
 )
+from camera_models.isp_reference import reference_rgb8
 from scenes.sourced import load_sourced
-from tests.helpers.reference_isp import reference_rgb8
 
 CASES = [(name, x0, y0) for name in ("canon-t6-18mm", "logitech-c270", "spedal-920") for x0, y0 in ((0, 0), (3, 1))]
 

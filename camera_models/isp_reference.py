@@ -1,4 +1,5 @@
-"""The ISP as it was computed before issue 24, in float: the reference the 16-bit OpenCV path is held to.
+"""The ISP as it was computed before issue 24, in float: the reference the 16-bit OpenCV path of
+:func:`camera_models.isp.process` is held to (tests) and timed against (``beacon-sim bench``).
 
 demosaic (float, :func:`camera_models.isp.demosaic`) → × white-balance gains → highlight
 mode (clip, unclip, blend) → camera RGB to linear sRGB → tone curve → 8-bit codes.
@@ -8,15 +9,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from camera_models.isp import blend_highlights, camera_to_srgb_matrix, demosaic, srgb_encode_8bit, tone_curve
+from camera_models.isp import (
+    ProcessedImage,
+    blend_highlights,
+    camera_to_srgb_matrix,
+    demosaic,
+    encode_jpeg,
+    srgb_encode_8bit,
+    tone_curve,
+    white_balance_gains,
+)
 
-__all__ = ["reference_rgb8"]
+__all__ = ["reference_process", "reference_rgb8"]
 
 
 def reference_rgb8(raw: np.ndarray, camera, x0: int = 0, y0: int = 0, gains: np.ndarray | None = None) -> np.ndarray:
     """8-bit RGB of a raw mosaic by the float path (noise reduction and sharpening off)."""
-    from camera_models.isp import white_balance_gains
-
     s, isp = camera.sensor, camera.isp
     linear = (raw.astype(np.float32) - np.float32(s.black_level_DN)) * np.float32(
         1.0 / (s.white_level_DN - s.black_level_DN)
@@ -31,3 +39,13 @@ def reference_rgb8(raw: np.ndarray, camera, x0: int = 0, y0: int = 0, gains: np.
     if isp.tone_curve == "srgb":
         return srgb_encode_8bit(out)
     return np.rint(tone_curve(out, isp.tone_curve, isp.tone_contrast) * 255.0).astype(np.uint8)
+
+
+def reference_process(raw: np.ndarray, camera, x0: int = 0, y0: int = 0) -> ProcessedImage:
+    """:func:`camera_models.isp.process` by the float path (noise reduction and sharpening must be off)."""
+    if camera.isp.noise_reduction != "none" or camera.isp.sharpening_amount > 0.0:
+        raise ValueError("isp: the reference path has no noise reduction or sharpening; use process()")
+    rgb8 = reference_rgb8(raw, camera, x0, y0)
+    return ProcessedImage(
+        np.ascontiguousarray(rgb8[..., ::-1]), encode_jpeg(rgb8, camera), white_balance_gains(raw, camera, x0, y0)
+    )
