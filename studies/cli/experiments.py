@@ -261,6 +261,7 @@ def bench(
         ("two_stage_vs_brute_force", b.two_stage_vs_brute_force),
         ("reuse_vs_rerender", b.reuse_vs_rerender),
         ("frame_vs_memcpy", b.frame_vs_memcpy),
+        ("whole_frame_paths", b.whole_frame_paths),
         ("warm_frames", b.warm_frames),
         ("cold_renders", b.cold_renders),
         ("workers_and_dask", b.workers_and_dask),
@@ -287,6 +288,11 @@ def bench(
         "cold_render_s": details["cold_renders"]["cold_render_s"],
         "near_field_s": details["cold_renders"]["near_field_s"],
         "full_frame_s": details["frame_vs_memcpy"]["frame_s"],
+        "t6_frame_s": details["whole_frame_paths"]["canon-t6-18mm"]["fast_frame_s"],
+        "t6_frame_reference_s": details["whole_frame_paths"]["canon-t6-18mm"]["reference_frame_s"],
+        "t6_frame_vs_memcpy": details["whole_frame_paths"]["canon-t6-18mm"]["fast_vs_memcpy"],
+        "webcam_frame_s": details["whole_frame_paths"]["logitech-c270"]["fast_frame_s"],
+        "webcam_frame_reference_s": details["whole_frame_paths"]["logitech-c270"]["reference_frame_s"],
         "replication_cold_h": details["full_grid_estimate"]["cold_h"],
         "details": details,
     }
@@ -318,6 +324,20 @@ def bench(
         "≤ 1.0 s; ≤ 130×",
     )
     t.add_row("  floor: JPEG encode + decode alone / memcpy", f"{frame['jpeg_codec_vs_memcpy']:.0f}×", "")
+    for name, goal in (("canon-t6-18mm", "≤ 0.4 s; ≤ 40×"), ("logitech-c270", "≤ 0.08 s")):
+        w = details["whole_frame_paths"][name]
+        t.add_row(
+            f"{name} whole frame, fast path (reference path beside); / memcpy",
+            f"{w['fast_frame_s']:.2f} s ({w['reference_frame_s']:.2f} s, {w['reference_vs_fast']:.1f}×); "
+            f"{w['fast_vs_memcpy']:.0f}×",
+            goal,
+        )
+        t.add_row(
+            "  sensor / ISP + JPEG / decode / detectors",
+            f"{w['fast_sensor_s']:.2f} / {w['fast_isp_jpeg_s']:.2f} / {w['fast_decode_s']:.2f} / "
+            f"{w['fast_detect_s']:.2f} s ({w['reference_sensor_s']:.2f} / {w['reference_isp_jpeg_s']:.2f} s)",
+            "",
+        )
     t.add_row("100-frame sweep: render reuse vs re-render", f"{result['reuse_vs_rerender']:.1f}×", "≥ 500×")
     grid = details["full_grid_estimate"]
     t.add_row(

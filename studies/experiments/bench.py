@@ -189,6 +189,78 @@ def frame_vs_memcpy(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
     }
 
 
+WHOLE_FRAME_CAMERAS = ("canon-t6-18mm", "logitech-c270")
+"""The DSLR and a webcam whose whole saved frames :func:`whole_frame_paths` times."""
+
+
+def whole_frame_paths(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
+    """Whole frames of the DSLR and a webcam by the fast camera path and by the reference path it
+    replaced (numpy sensor, float ISP: ``capture(reference=True)``), side by side, by stage:
+    optics and mosaic, sensor, ISP and JPEG encoding, JPEG decoding, both detectors (median
+    of ``repeats`` frames each, s), and each frame against a memcpy of its bytes."""
+    from camera_models.capture import background_electrons_per_s, frame_meter, full_frame_mosaic
+    from camera_models.exposure import auto_exposure
+    from camera_models.isp import process
+    from camera_models.isp_reference import reference_process
+    from camera_models.optics import optical_image
+    from camera_models.sensor import SensorSettings, expose
+    from scenes.background import render_background
+
+    out = {}
+    for name in WHOLE_FRAME_CAMERAS:
+        sc = Scenario(**{**scenario, "camera": name}, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
+        camera = load_camera(name)
+        intrinsics = Intrinsics.from_geometry(camera.geometry)
+        radiance, background = render(sc), render_background(sc)
+        paths = {}
+        for path in ("fast", "reference"):
+            names = ("optics_s", "sensor_s", "isp_jpeg_s", "decode_s", "detect_s")
+            stages: dict[str, list[float]] = {k: [] for k in names}
+            for seed in range(repeats):
+                t0 = time.perf_counter()
+                n = camera.lens.f_number
+                opt = optical_image(radiance, camera, 1.0, n)
+                bg = background_electrons_per_s(background, camera, n)
+                if camera.exposure.mode == "auto":
+                    ex = auto_exposure(camera, frame_meter(opt.electrons_rgb, opt.x0, opt.y0, camera, bg))
+                else:
+                    ex = manual_exposure(camera)
+                t = ex.exposure_s
+                mean = full_frame_mosaic(opt.electrons_rgb * t, opt.x0, opt.y0, camera, bg * t)
+                t1 = time.perf_counter()
+                settings = SensorSettings(t, ex.analog_gain)
+                raw = expose(mean, camera.sensor, settings, seed, path="numpy" if path == "reference" else None)
+                t2 = time.perf_counter()
+                if path == "reference":
+                    img = reference_process(raw, camera)
+                else:
+                    img = process(raw, camera, analog_gain=ex.analog_gain)
+                t3 = time.perf_counter()
+                image = cv2.imdecode(np.frombuffer(img.jpeg, np.uint8), cv2.IMREAD_COLOR)
+                t4 = time.perf_counter()
+                for tracker in ("thesis", "best"):
+                    detect(image, intrinsics, tracker=tracker, estimator="best")
+                t5 = time.perf_counter()
+                for k, v in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True):
+                    stages[k].append(v)
+            medians = {k: float(np.median(v)) for k, v in stages.items()}
+            paths[path] = {"frame_s": float(np.median([sum(x) for x in zip(*stages.values(), strict=True)])), **medians}
+        copies = []
+        for _ in range(20):
+            t0 = time.perf_counter()
+            image.copy()
+            copies.append(time.perf_counter() - t0)
+        memcpy = float(np.median(copies))
+        out[name] = {
+            **{f"{path}_{k}": v for path, d in paths.items() for k, v in d.items()},
+            "memcpy_s": memcpy,
+            "fast_vs_memcpy": paths["fast"]["frame_s"] / memcpy,
+            "reference_vs_fast": paths["reference"]["frame_s"] / paths["fast"]["frame_s"],
+            "frame_bytes": int(image.nbytes),
+        }
+    return out
+
+
 STUDY_MIX = ("range_limit", "brightness_diffuser", "webcam_vs_dslr")
 """The studies whose quick forms make the warm-frame mix (the main job's three studies)."""
 
