@@ -75,6 +75,7 @@ __all__ = [
     "best_rows",
     "candidate_ranges",
     "decision_text",
+    "design_evidence",
     "far_status",
     "near_status",
     "next_ranges",
@@ -388,6 +389,24 @@ def decision_text(rec: Mapping, outcome: Mapping | None) -> str:
         return f"{n} frames: decided ({outcome['far_how']})"
     why = {"budget": "budget spent", "rounds": "rounds spent"}.get(outcome["stop"], outcome["stop"])
     return f"{n} frames: not decided ({why}; {outcome['far_how']})"
+
+
+def design_evidence(summary: Mapping) -> str:
+    """How a sequential design decided a study summary's far limits, in one sentence ("" without
+    one): the target, how many of the best tracker's far limits (``max_range`` records) met it,
+    the frames per limit and in all, and the budget."""
+    design = summary.get("design")
+    if not design:
+        return ""
+    recs = summary.get("max_range", [])
+    frames = sorted(r["frames"] for r in recs)
+    span = f"{frames[0]}" if frames[0] == frames[-1] else f"{frames[0]}-{frames[-1]}"
+    decided = sum(bool(r.get("far_decided")) for r in recs)
+    return (
+        f"Sequential design: from the coarse grid, frames added in rounds near each undecided limit until its 95 % "
+        f"interval is within {design['target']}: {decided} of {len(recs)} far limits decided, {span} frames per "
+        f"limit, {design['frames']} frames in all (budget {design['budget_frames']})."
+    )
 
 
 def _units(conditions: Sequence[dict], unit_fields: Sequence[tuple[str, str]]) -> dict[tuple, list[dict]]:
