@@ -91,7 +91,11 @@ def on_store(tasks, out, execution, description=""):
     return run_tasks(tasks, out, stored_fake, workers=1)
 
 
-def _design(r50=R50, s=SLOPE, rep=0, design=SequentialDesign(target_width_m=1.0, budget_frames=600)):
+WIDTH_1M = SequentialDesign(target_width_m=1.0, budget_frames=600)
+"""The far limit to a 1 m wide interval, within 600 frames."""
+
+
+def _design(r50=R50, s=SLOPE, rep=0, design=WIDTH_1M):
     result = run_design("fake", OPTIONS, design, Path("unused"), UNIT, frames=in_memory(r50, s, rep))
     return result, estimate_max_range(result.rows).to_dict()
 
@@ -111,7 +115,7 @@ def test_candidate_ranges_refine_the_coarse_grid_and_reach_the_stated_maximum():
     assert candidate_ranges((2, 4, 6), SequentialDesign()) == (2, 3, 4, 5, 6)
     assert candidate_ranges((2, 5, 7, 10), SequentialDesign(max_range_m=14)) == tuple(range(2, 15))
     assert candidate_ranges((2, 4), SequentialDesign(refine=4))[:3] == (2, 2.5, 3)
-    with pytest.raises(ValueError, match="^ranges_m: expected at least 2 ranges"):
+    with pytest.raises(ValueError, match=r"^ranges_m: expected at least 2 ranges"):
         candidate_ranges((4,), SequentialDesign())
 
 
@@ -133,7 +137,7 @@ def test_bad_settings_are_refused_in_one_line_naming_the_field(field, value):
 
 
 def test_a_budget_below_the_coarse_grid_is_refused():
-    with pytest.raises(ValueError, match="^budget_frames: expected at least the coarse grid's 18 frames, got 10$"):
+    with pytest.raises(ValueError, match=r"^budget_frames: expected at least the coarse grid's 18 frames, got 10$"):
         run_design("fake", OPTIONS, SequentialDesign(budget_frames=10), Path("unused"), UNIT, frames=in_memory())
 
 
