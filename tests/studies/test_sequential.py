@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -91,12 +92,14 @@ def on_store(tasks, out, execution, description=""):
     return run_tasks(tasks, out, stored_fake, workers=1)
 
 
+SCRATCH = Path(tempfile.gettempdir()) / "beacon-sim-test-sequential"
+"""Where the in-memory designs write design.json (their frames are not stored)."""
 WIDTH_1M = SequentialDesign(target_width_m=1.0, budget_frames=600)
 """The far limit to a 1 m wide interval, within 600 frames."""
 
 
 def _design(r50=R50, s=SLOPE, rep=0, design=WIDTH_1M):
-    result = run_design("fake", OPTIONS, design, Path("unused"), UNIT, frames=in_memory(r50, s, rep))
+    result = run_design("fake", OPTIONS, design, SCRATCH, UNIT, frames=in_memory(r50, s, rep))
     return result, estimate_max_range(result.rows).to_dict()
 
 
@@ -138,7 +141,7 @@ def test_bad_settings_are_refused_in_one_line_naming_the_field(field, value):
 
 def test_a_budget_below_the_coarse_grid_is_refused():
     with pytest.raises(ValueError, match=r"^budget_frames: expected at least the coarse grid's 18 frames, got 10$"):
-        run_design("fake", OPTIONS, SequentialDesign(budget_frames=10), Path("unused"), UNIT, frames=in_memory())
+        run_design("fake", OPTIONS, SequentialDesign(budget_frames=10), SCRATCH, UNIT, frames=in_memory())
 
 
 def test_a_round_goes_near_the_estimate_and_across_the_interval_and_extends_when_it_still_works():
