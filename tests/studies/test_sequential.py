@@ -206,7 +206,7 @@ def test_the_far_limit_interval_covers_the_true_limit():
 def test_the_far_limit_interval_covers_the_true_limit_in_100_studies():
     hits, frames = _coverage(100)
     print(f"coverage {hits} of 100; frames mean {np.mean(frames):.0f}, median {np.median(frames):.0f}")
-    assert hits >= 90  # measured: 96 of 100
+    assert hits >= 90  # measured: 95 of 100
 
 
 def test_it_reaches_the_target_with_fewer_frames_than_the_uniform_grid():
@@ -232,7 +232,7 @@ def test_the_frame_ratio_over_20_studies_and_two_truths():
             uni.append(len(rows))
         ratio = np.mean(seq) / np.mean(uni)
         print(f"r50 {r50}, s {s}, {design.target_text()}: sequential {np.mean(seq):.0f}, uniform {np.mean(uni):.0f}")
-        assert ratio < 0.7
+        assert ratio < 0.7  # measured: 0.37, 0.19 and 0.46
 
 
 def test_the_same_seed_gives_the_same_rounds_and_another_seed_other_frames():
