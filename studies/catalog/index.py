@@ -21,6 +21,7 @@ import pandas as pd
 from scenes.render_cache import atomic_write_bytes
 from studies.catalog import brightness_diffuser, range_limit, webcam_vs_dslr
 from studies.engine.report import Report
+from studies.engine.sequential import design_evidence
 
 STUDY_TITLES = {
     range_limit.NAME: "how far, versus yaw (working range per camera)",
@@ -139,9 +140,12 @@ def _webcam_records(wv: dict, cam: str, yaws: list[float]) -> list[dict | None]:
 
 
 def _working_lines(r: dict) -> list[str]:
-    """A range-limit record as lines: the working range, the far limit's interval, the
-    failures nearer than the best range and the configuration."""
+    """A range-limit record as lines: the working range, the far limit's interval, how many
+    frames decided it (sequential design), the failures nearer than the best range and the
+    configuration."""
     lines = [r["working_range"], f"far limit 95 % interval: {r['far_interval']}"]
+    if r.get("decision"):
+        lines.append(r["decision"])
     if r.get("near_failures"):
         lines.append(r["failures_nearer"])
     where = f"{r['beacon'].upper()} {r['side']}" + ("" if r["side"] == "all sides" else " side")
@@ -249,16 +253,19 @@ def _verdict(records: list[dict], yaws: list[float]) -> list[str]:
 
 def _evidence(rl: dict, bd: dict, wv: dict) -> str:
     parts = []
-    if rl:
+    if rl.get("design"):
+        parts.append(f"range-limit: {design_evidence(rl).removeprefix('Sequential design: ').rstrip('.')}")
+    elif rl:
         parts.append(f"range-limit {rl.get('frames_per_point', '?')} frames per range point")
     if bd.get("configurations"):
         parts.append(f"brightness-diffuser {min(c['frames'] for c in bd['configurations'])} per configuration")
-    if wv.get("max_range"):
+    if wv.get("design"):
+        parts.append(f"webcam-vs-dslr: {design_evidence(wv).removeprefix('Sequential design: ').rstrip('.')}")
+    elif wv.get("max_range"):
         parts.append(f"webcam-vs-dslr {min(r['frames'] for r in wv['max_range'])} frames per camera and drive")
+    few = "" if rl.get("design") or wv.get("design") else " With so few frames the intervals are wide:"
     return (
-        "Evidence: "
-        + "; ".join(parts)
-        + ". With so few frames the intervals are wide: an interval from 0 m means the frames cannot exclude that "
+        "Evidence: " + "; ".join(parts) + f".{few} An interval from 0 m means the frames cannot exclude that "
         "no range reaches P ≥ 0.95 (that needs ≥ 59 correct frames in a row at one range); '≥' and '≤' mean the "
         "farthest or nearest range tried still worked. Working range: P(correct side, 5 markers numbered, range "
         "within 10 %, yaw within 5°) ≥ 0.95, best tracker."

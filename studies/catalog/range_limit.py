@@ -5,6 +5,11 @@ For each camera × beacon × side × LED drive × yaw it renders frames over a r
 correct pose has P ≥ 0.95, with profile-likelihood 95 % intervals and the causes of the
 failures on either side (:mod:`studies.engine.max_range`), for the best tracker and the
 study's. The design's planned 10 m is drawn against it.
+
+With a :class:`studies.engine.sequential.SequentialDesign` (``run(..., design=...)``; the
+main job's is :func:`default_design`) the range grid is only the coarse start: frames are
+added in rounds where each far (and near) limit is undecided, until its interval meets the
+target or the budget is spent, and every record says how many frames decided it.
 """
 
 from __future__ import annotations
@@ -25,14 +30,23 @@ from studies.engine.max_range import (
     working_range_text,
 )
 from studies.engine.report import Report
+from studies.engine.sequential import SequentialDesign, decision_text, design_evidence, run_design
 from studies.engine.sweep import Execution, sweep
-from studies.engine.tables import pose_outcomes
+from studies.engine.tables import pose_outcomes, write_tables
 from studies.engine.tasks import StudyOptions, grid_conditions
 
 NAME = "range-limit"
 PLANNED_RANGE_M = 10.0
 GROUP = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]
 """One working-range estimate per these columns."""
+UNIT_FIELDS = (
+    ("camera", "camera"),
+    ("beacon", "beacon"),
+    ("side", "side"),
+    ("led_current_mA", "led_current_mA"),
+    ("yaw_deg", "nominal_yaw_deg"),
+)
+"""A sequential design's unit (condition field, row column): :data:`GROUP` without the tracker."""
 ANSWER_LABELS = {
     "camera": "camera",
     "beacon": "beacon",
@@ -46,6 +60,8 @@ ANSWER_LABELS = {
     "correct": "correct frames",
 }
 """Columns of the answer table and their headers."""
+DECISION_LABEL = {"decision": "frames that decided it"}
+"""The answer table's extra column when a sequential design placed the frames."""
 
 
 def default_options(quick: bool) -> StudyOptions:
@@ -70,13 +86,31 @@ def default_options(quick: bool) -> StudyOptions:
     )
 
 
-def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
-    """Run the study into ``out``; returns the summary (``max_range`` records)."""
-    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
-    return write_outputs(out, options, frame)
+def default_design(quick: bool) -> SequentialDesign:
+    """The sequential design the main job runs (quick) or a full run starts from: far and near
+    limits to ±20 % (the issue's goal), extended to 20 m when the farthest range still works;
+    the quick one within 120 frames per unit (assumed: the fake of known truth needs 60-150
+    at ±20 %, ``tests/studies/test_sequential.py``), the full one within 240 (the default)."""
+    grid = default_options(quick)
+    units = len(grid.cameras) * len(grid.beacons) * len(grid.sides) * len(grid.currents_mA) * len(grid.yaws_deg)
+    return SequentialDesign(target_relative=0.2, budget_frames=120 * units if quick else None, max_range_m=20.0)
 
 
-def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
+def run(
+    out: Path, options: StudyOptions, execution: Execution = Execution(), design: SequentialDesign | None = None
+) -> dict:
+    """Run the study into ``out``; returns the summary (``max_range`` records).
+
+    ``design``: place the frames sequentially (:mod:`studies.engine.sequential`), starting from
+    ``options``' grid; None: the fixed grid."""
+    if design is None:
+        frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
+        return write_outputs(out, options, frame)
+    result = run_design(NAME, options, design, out, UNIT_FIELDS, estimators=["best"], execution=execution)
+    return write_outputs(out, options, write_tables(out, result.rows), result.summary())
+
+
+def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design: dict | None = None) -> dict:
     """summary.json and report.html of a finished sweep's results table; returns the summary.
 
     Parameters
@@ -84,19 +118,26 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict
     out : the study's output directory.
     options : what was swept (named in the report).
     frame : results table (one row per frame and tracker, ``results.parquet``).
+    design : :meth:`studies.engine.sequential.DesignResult.summary` when a sequential design
+        placed the frames.
     """
-    summary = analyse(frame)
+    summary = analyse(frame, design)
     _report(Path(out), options, frame, summary)
     atomic_write_bytes(Path(out) / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
     return summary
 
 
-def analyse(frame: pd.DataFrame) -> dict:
+def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     """The summary: one working-range record per camera × beacon × side × drive × yaw for
     each tracker (``max_range``: best tracker; ``max_range_thesis_tracker``: the study's),
     each with the fields of :class:`studies.engine.max_range.MaxRange` and its wording
     (``working_range``, ``far_limit``, ``far_interval``, ``failures_nearer``), and the
-    best tracker's outcomes per range point (``outcomes``, Jeffreys posterior of P)."""
+    best tracker's outcomes per range point (``outcomes``, Jeffreys posterior of P).
+
+    With a sequential ``design`` (its summary) the summary holds it as ``design`` and each
+    record says how many frames decided its limits (``decision``; ``far_decided``,
+    ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
+    units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
         cam, beacon, side, current, yaw, tracker = key
@@ -116,10 +157,18 @@ def analyse(frame: pd.DataFrame) -> dict:
             far_interval=far_interval_text(rec),
             failures_nearer=near_failures_text(rec),
         )
+        if design is not None:
+            unit = units.get((cam, beacon, side, float(current), float(yaw)))
+            rec.update(
+                decision=decision_text(rec, unit),
+                far_decided=bool(unit and unit["far_decided"]),
+                near_decided=bool(unit and unit["near_decided"]),
+                design_stop=unit["stop"] if unit else "",
+            )
         records.append(rec)
     best = frame[frame.tracker == "best"]
     outcomes = pose_outcomes(best, ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg"])
-    return {
+    summary = {
         "study": NAME,
         "planned_range_m": PLANNED_RANGE_M,
         "frames_per_point": int(outcomes.frames.min()) if len(outcomes) else 0,
@@ -129,6 +178,9 @@ def analyse(frame: pd.DataFrame) -> dict:
             "records"
         ),
     }
+    if design is not None:
+        summary["design"] = design
+    return summary
 
 
 def lead_lines(summary: dict) -> list[str]:
@@ -179,7 +231,8 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
         f"Cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; sides "
         f"{', '.join(options.sides)}; LED drive {', '.join(f'{c:g}' for c in options.currents_mA)} mA; yaw "
         f"{', '.join(f'{y:g}' for y in options.yaws_deg)}°; ranges {', '.join(f'{r:g}' for r in options.ranges_m)} m; "
-        f"{options.seeds} frames per point. Working range: where P(correct side, 5 markers numbered, range within "
+        f"{options.seeds} frames per point{_design_words(summary)}. Working range: where P(correct side, 5 markers "
+        "numbered, range within "
         "10 %, yaw within 5°) ≥ 0.95, from a logistic rise up to the range with the best success rate and a "
         "logistic fall-off beyond it (maximum likelihood; 95 % intervals from the plain and the Firth-penalised "
         "profile likelihood)."
@@ -216,10 +269,11 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
             correct=[f"{s} of {n}" for s, n in zip(table.successes, table.frames, strict=True)],
             failures_nearer=[t or "– (none tried nearer)" for t in table.failures_nearer],
         )
+        labels = {**ANSWER_LABELS, **(DECISION_LABEL if "decision" in answers else {})}
         rep.table(
-            answers[list(ANSWER_LABELS)],
+            answers[list(labels)],
             f"Working range per camera and yaw, {label}",
-            labels=ANSWER_LABELS,
+            labels=labels,
             formats={"led_current_mA": "{:g}", "yaw_deg": "{:g}"},
             css_class="keys",
         )
@@ -263,7 +317,17 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
     rep.write(out / "report.html")
 
 
+def _design_words(summary: dict) -> str:
+    design = summary.get("design")
+    return f" to start, then more where the limits are undecided (target {design['target']})" if design else ""
+
+
 def _evidence_note(summary: dict) -> str:
+    if summary.get("design"):
+        return (
+            design_evidence(summary) + " An interval from 0 m means the frames cannot exclude that no range reaches "
+            "P ≥ 0.95; '≥' means the fit shows no fall-off up to the farthest range tried."
+        )
     n = summary.get("frames_per_point", 0)
     return (
         f"Evidence: {n} frames per range point. An interval from 0 m means the frames cannot exclude that no range "

@@ -8,6 +8,11 @@ maximum range (:mod:`studies.engine.max_range`), colour separability of the side
 linear-RGB chromaticity (pairwise Mahalanobis distance, ΔE2000 of mean colours) and the
 detectors' colour confusion matrices, a ranking, and the study's image mosaic (the same
 target at 2, 5 and 7 m through every camera).
+
+With a :class:`studies.engine.sequential.SequentialDesign` (``run(..., design=...)``) the
+range grid is the coarse start of a sequential design per camera × beacon × room × drive
+(both sides pooled, as the working range pools them) and every working-range record says
+how many frames decided it.
 """
 
 from __future__ import annotations
@@ -33,8 +38,9 @@ from studies.engine.max_range import (
 )
 from studies.engine.metrics import bayes_error, confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.engine.report import Report
+from studies.engine.sequential import SequentialDesign, decision_text, design_evidence, run_design
 from studies.engine.sweep import Execution, sweep
-from studies.engine.tables import detection_curve
+from studies.engine.tables import detection_curve, write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
 
 NAME = "webcam-vs-dslr"
@@ -43,6 +49,14 @@ MOSAIC_RANGES_M = (2.0, 5.0, 7.0)
 DRIVES_MA = (2.0, 20.0)
 """LED drive: the study dimmed its LEDs with potentiometers to an unknown setting, so the
 sweep brackets it: 20 mA (datasheet test current) and 2 mA (a tenth, well dimmed)."""
+UNIT_FIELDS = (
+    ("camera", "camera"),
+    ("beacon", "beacon"),
+    ("environment", "environment"),
+    ("led_current_mA", "led_current_mA"),
+)
+"""A sequential design's unit (condition field, row column): one working-range record's
+frames (sides and yaws pooled), without the tracker."""
 
 
 def default_options(quick: bool) -> StudyOptions:
@@ -68,25 +82,50 @@ def default_options(quick: bool) -> StudyOptions:
     )
 
 
-def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
-    """Run the study into ``out``; returns the summary."""
-    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution)
+def default_design(quick: bool) -> SequentialDesign:
+    """The sequential design the main job runs (quick) or a full run starts from: far and near
+    limits to ±20 %, extended to 16 m when the farthest range still works; the quick one
+    within 60 slots (120 frames over its 2 sides) per unit (assumed: the fake of known truth
+    needs 60-150 frames at ±20 %, ``tests/studies/test_sequential.py``), the full one within
+    240 frames per unit (the default)."""
+    grid = default_options(quick)
+    units = len(grid.cameras) * len(grid.beacons) * len(grid.environments) * len(grid.currents_mA)
+    per_slot = len(grid.sides) * len(grid.yaws_deg) * len(grid.diffusers)
+    budget = 60 * per_slot * units if quick else None
+    return SequentialDesign(target_relative=0.2, budget_frames=budget, max_range_m=16.0)
+
+
+def run(
+    out: Path, options: StudyOptions, execution: Execution = Execution(), design: SequentialDesign | None = None
+) -> dict:
+    """Run the study into ``out``; returns the summary.
+
+    ``design``: place the frames sequentially (:mod:`studies.engine.sequential`), starting from
+    ``options``' grid; None: the fixed grid."""
+    if design is None:
+        frame = sweep(NAME, grid_conditions(options), options, out, execution=execution)
+        mosaic_png(options, out)
+        return write_outputs(out, options, frame)
+    result = run_design(NAME, options, design, out, UNIT_FIELDS, execution=execution)
+    frame = write_tables(out, result.rows)
     mosaic_png(options, out)
-    return write_outputs(out, options, frame)
+    return write_outputs(out, options, frame, result.summary())
 
 
-def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
+def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design: dict | None = None) -> dict:
     """summary.json and report.html of a finished sweep's results table (the mosaic is
-    taken from ``out/mosaic.png`` where :func:`mosaic_png` wrote it); returns the summary."""
+    taken from ``out/mosaic.png`` where :func:`mosaic_png` wrote it); returns the summary.
+    ``design``: :meth:`studies.engine.sequential.DesignResult.summary` when a sequential
+    design placed the frames."""
     out = Path(out)
-    summary = analyse(frame)
+    summary = analyse(frame, design)
     mosaic = (out / "mosaic.png").read_bytes() if (out / "mosaic.png").is_file() else None
     _report(out, options, frame, summary, mosaic)
     atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
     return summary
 
 
-def analyse(frame) -> dict:
+def analyse(frame, design: dict | None = None) -> dict:
     """Headline numbers.
 
     * ``max_range``: the working range per camera, beacon, environment, drive and tracker
@@ -97,9 +136,13 @@ def analyse(frame) -> dict:
     * ``ranking``: cameras by their best drive's far limit (best tracker, to 0.1 m; ``at_least``:
       no fall-off up to the farthest range tried, printed "≥"), then by that drive's colour
       separability; ``tied_on_range`` names the cameras whose far limits are equal;
-    * ``yaws_deg``: the yaws swept (every record pools them).
+    * ``yaws_deg``: the yaws swept (every record pools them);
+    * ``design`` (with a sequential ``design``, its summary): then each ``max_range`` record
+      says how many frames decided it (``decision``, ``far_decided``, ``near_decided``,
+      ``design_stop``: the best tracker's, which placed the frames).
     """
     summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
+    units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
     if "nominal_yaw_deg" in frame:
         summary["yaws_deg"] = sorted(float(y) for y in set(frame.nominal_yaw_deg))
     keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
@@ -111,6 +154,14 @@ def analyse(frame) -> dict:
             far_interval=far_interval_text(rec),
             failures_nearer=near_failures_text(rec),
         )
+        if design is not None:
+            unit = units.get((rec["camera"], rec["beacon"], rec["environment"], float(rec["led_current_mA"])))
+            rec.update(
+                decision=decision_text(rec, unit),
+                far_decided=bool(unit and unit["far_decided"]),
+                near_decided=bool(unit and unit["near_decided"]),
+                design_stop=unit["stop"] if unit else "",
+            )
         summary["max_range"].append(rec)
     frames = frame[(frame.tracker == "best") & (frame.estimator == "best")]  # one row per frame
     for (camera, current), g in frames.groupby(["camera", "led_current_mA"]):
@@ -166,6 +217,8 @@ def analyse(frame) -> dict:
                 "tied_on_range": tied,
             }
         )
+    if design is not None:
+        summary["design"] = design
     return summary
 
 
@@ -342,12 +395,16 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     per_point = frame[(frame.tracker == "best") & (frame.estimator == "best")].groupby(
         ["camera", "beacon", "side", "environment", "led_current_mA", "nominal_range_m"]
     )
+    evidence = (
+        design_evidence(summary)
+        if summary.get("design")
+        else f"Evidence: {int(per_point.size().min()) if len(frame) else 0} frames per camera, side, range and drive."
+    )
     rep.lead(
         [
             *lead_lines(summary),
-            f"Evidence: {int(per_point.size().min()) if len(frame) else 0} frames per camera, side, range and drive. "
-            "An interval from 0 m means the frames cannot exclude that no range reaches P ≥ 0.95; '≥' means no "
-            "fall-off up to the farthest range tried.",
+            f"{evidence} An interval from 0 m means the frames cannot exclude that no range reaches P ≥ 0.95; "
+            "'≥' means no fall-off up to the farthest range tried.",
         ]
     )
     currents = sorted(set(frame.led_current_mA))
@@ -399,10 +456,11 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
         correct=[f"{k} of {n}" for k, n in zip(table.successes, table.frames, strict=True)],
         failures_nearer=[t or "– (none tried nearer)" for t in table.failures_nearer],
     )
+    labels = {**RANGE_LABELS, **({"decision": "frames that decided it"} if "decision" in table else {})}
     rep.table(
-        table[list(RANGE_LABELS)],
+        table[list(labels)],
         "Where P(correct pose) ≥ 0.95 (logistic rise and fall-off; profile-likelihood 95 % interval) and what ends it",
-        labels=RANGE_LABELS,
+        labels=labels,
         formats={"led_current_mA": "{:g}"},
         css_class="keys",
     )

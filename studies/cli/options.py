@@ -51,6 +51,30 @@ Scheduler = Annotated[
     typer.Option("--scheduler", help="Dask scheduler address (tcp://HOST:PORT).", show_default="local processes"),
 ]
 Seeds = Annotated[int | None, typer.Option("--seeds", help="Noise seeds per condition.", show_default="the study's")]
+TargetWidthM = Annotated[
+    float | None,
+    typer.Option(
+        "--target-width-m",
+        help="Sequential design: add frames until each range limit's 95 % interval is at most this wide, m.",
+        show_default="the study's design",
+    ),
+]
+TargetRelative = Annotated[
+    float | None,
+    typer.Option(
+        "--target-relative",
+        help="Sequential design: ... or until both ends lie within ± this fraction of the limit (0.2: ±20 %).",
+        show_default="the study's design",
+    ),
+]
+BudgetFrames = Annotated[
+    int | None,
+    typer.Option(
+        "--budget-frames",
+        help="Sequential design: frames the study may spend in all, its coarse grid included.",
+        show_default="the study's design",
+    ),
+]
 Cameras = Annotated[
     str | None,
     typer.Option("--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all"),

@@ -9,13 +9,15 @@ from typing import Annotated
 
 import typer
 
-from studies.catalog import MAIN_JOB, STUDIES
+from studies.catalog import MAIN_JOB, SEQUENTIAL, STUDIES
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, prepare_out_dir
+from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
+from studies.engine.tasks import grid_conditions
 
 OutResumable = Annotated[
     Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory (re-run to resume).")
@@ -25,6 +27,46 @@ OutResumable = Annotated[
 def _execution(workers: int | None, scheduler: str | None) -> Execution:
     """Validated :class:`Execution` of a sweep (:func:`studies.cli.common.execution`)."""
     return execution(workers, scheduler)
+
+
+DESIGN_OPTIONS = {
+    "target_width_m": "target-width-m",
+    "target_relative": "target-relative",
+    "budget_frames": "budget-frames",
+    "ranges_m": "ranges-m",
+}
+"""Sequential-design fields set on the command line, and their options."""
+
+
+def _design(name: str, quick: bool, settings: dict, options) -> SequentialDesign | None:
+    """The sequential design of study ``name`` starting from ``options``' grid: its
+    ``default_design(quick)`` with the user's ``settings`` (design field → value or None),
+    checked; None when none was asked for. A UsageError when the study has none."""
+    given = [k for k, v in settings.items() if v is not None]
+    if not given:
+        return None
+    if name not in SEQUENTIAL:
+        raise UsageError(
+            f"{DESIGN_OPTIONS[given[0]]}: expected a study with a sequential design "
+            f"({', '.join(SEQUENTIAL)}), got {name}"
+        )
+    return _checked(SEQUENTIAL[name].default_design(quick).with_overrides(**settings), options)
+
+
+def _checked(design: SequentialDesign, options) -> SequentialDesign:
+    """``design`` validated for the coarse grid of ``options``, errors named by their option."""
+    coarse = len(grid_conditions(options)) * options.seeds
+    try:
+        design.validate()
+        candidate_ranges(options.ranges_m, design)
+        if design.budget_frames is not None and design.budget_frames < coarse:
+            raise ValueError(
+                f"budget_frames: expected at least the coarse grid's {coarse} frames, got {design.budget_frames}"
+            )
+    except ValueError as e:
+        field, _, rest = str(e).partition(":")
+        raise UsageError(f"{DESIGN_OPTIONS.get(field, field)}:{rest}") from None
+    return design
 
 
 def study(
@@ -50,10 +92,17 @@ def study(
         str | None, typer.Option("--currents-ma", help="Comma-separated LED currents, mA.", show_default="the study's")
     ] = None,
     seeds: opt.Seeds = None,
+    target_width_m: opt.TargetWidthM = None,
+    target_relative: opt.TargetRelative = None,
+    budget_frames: opt.BudgetFrames = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
-    """Run a study sweep and write report.html, results.csv/.parquet and summary.json."""
+    """Run a study sweep and write report.html, results.csv/.parquet and summary.json.
+
+    With --target-width-m, --target-relative or --budget-frames (range-limit, webcam-vs-dslr)
+    its ranges are the start of a sequential design that adds frames where the range limits
+    are undecided (design.json)."""
     if name not in STUDIES:
         raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
     module = STUDIES[name]
@@ -66,10 +115,15 @@ def study(
         seeds=seeds,
     )
     options.validate()
+    settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
+    design = _design(name, quick, settings, options)
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    module.run(out, options, execution)
+    if design is None:
+        module.run(out, options, execution)
+    else:
+        module.run(out, options, execution, design=design)
     console.print(f"{name}: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
 
 
@@ -115,9 +169,18 @@ def main_job(
     out: Annotated[Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory.")] = Path(
         "out/main-job"
     ),
+    target_width_m: opt.TargetWidthM = None,
+    target_relative: opt.TargetRelative = None,
+    budget_frames: opt.BudgetFrames = None,
     workers: opt.Workers = None,
 ) -> None:
-    """Run the quick versions of the three studies on the built-in defaults."""
+    """Run the quick versions of the three studies on the built-in defaults; range-limit and
+    webcam-vs-dslr place their frames by a sequential design (each its own --budget-frames)."""
+    settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
+    designs = {
+        n: _checked(m.default_design(True).with_overrides(**settings), m.default_options(True))
+        for n, m in SEQUENTIAL.items()
+    }
     execution = _execution(workers, None)
     prepare_out_dir(out)
     t0 = time.perf_counter()
@@ -125,7 +188,10 @@ def main_job(
         module = STUDIES[name]
         options = module.default_options(True)
         options.validate()
-        module.run(prepare_out_dir(out / name), options, execution)
+        if name in designs:
+            module.run(prepare_out_dir(out / name), options, execution, design=designs[name])
+        else:
+            module.run(prepare_out_dir(out / name), options, execution)
     write_index(out, elapsed_s=time.perf_counter() - t0)
     console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 

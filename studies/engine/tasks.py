@@ -168,27 +168,45 @@ def frame_tasks(
     """
     if options.frame not in FRAMES:
         raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {options.frame!r}")
-    tasks = []
-    for condition in conditions:
-        for seed in range(options.seeds):
-            j = jitter(condition, seed % options.jitter_poses)
-            scenario = dict(condition)
-            scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
-            scenario["yaw_deg"] = round(max(-90.0, min(90.0, condition["yaw_deg"] + j["yaw_offset_deg"])), 9)
-            scenario["camera_height_m"] = round(j["height_m"], 9)
-            task = {
-                "scenario": scenario,
-                "render": dict(options.render),
-                "seed": seed,
-                "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]},
-            }
-            if options.frame == "full":
-                task["full_frame"] = True
-            if exposure:
-                task["exposure"] = exposure
-            if trackers:
-                task["trackers"] = list(trackers)
-            if estimators:
-                task["estimators"] = list(estimators)
-            tasks.append(task)
-    return tasks
+    return [
+        frame_task(condition, seed, options, exposure, trackers, estimators)
+        for condition in conditions
+        for seed in range(options.seeds)
+    ]
+
+
+def frame_task(
+    condition: dict,
+    seed: int,
+    options: StudyOptions,
+    exposure: dict | None = None,
+    trackers: Sequence[str] | None = None,
+    estimators: Sequence[str] | None = None,
+) -> dict:
+    """The frame task of one condition and noise seed index ``seed`` (≥ 0; jittered pose
+    ``seed % options.jitter_poses``): what :func:`frame_tasks` makes for each seed, and what a
+    sequential design (:mod:`studies.engine.sequential`) makes for the seeds it adds."""
+    if options.frame not in FRAMES:
+        raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {options.frame!r}")
+    if not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    j = jitter(condition, seed % options.jitter_poses)
+    scenario = dict(condition)
+    scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
+    scenario["yaw_deg"] = round(max(-90.0, min(90.0, condition["yaw_deg"] + j["yaw_offset_deg"])), 9)
+    scenario["camera_height_m"] = round(j["height_m"], 9)
+    task = {
+        "scenario": scenario,
+        "render": dict(options.render),
+        "seed": seed,
+        "nominal": {"range_m": condition["range_m"], "yaw_deg": condition["yaw_deg"]},
+    }
+    if options.frame == "full":
+        task["full_frame"] = True
+    if exposure:
+        task["exposure"] = exposure
+    if trackers:
+        task["trackers"] = list(trackers)
+    if estimators:
+        task["estimators"] = list(estimators)
+    return task

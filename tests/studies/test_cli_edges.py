@@ -44,6 +44,7 @@ WORK_FUNCTIONS = {
     "pipeline.calibration": ["calibrate"],
     "studies.engine.runner": ["run_tasks"],
     "studies.engine.sweep": ["sweep", "sweep_in_chunks", "run_frames"],
+    "studies.engine.sequential": ["run_design"],
     "studies.engine.colour_reach": ["reach_table"],
     "studies.catalog.validate": ["run"],
     "studies.catalog.unknowns_search": ["run"],
