@@ -31,7 +31,8 @@ from camera_models.optics import (
     optical_image,
     relative_illumination,
 )
-from camera_models.sensor import SensorSettings, bloom, cfa_channels, expose, mosaic
+from camera_models.sensor import SensorSettings, bloom, cfa_channels, mosaic
+from camera_models.sensor_paths import expose
 from scenes.radiance import SpectralRadiance
 from scenes.view import project
 

@@ -27,7 +27,8 @@ import numpy as np
 
 from camera_models.camera import Camera
 from camera_models.optics import photons_per_joule
-from camera_models.sensor import SensorSettings, cfa_channels, emva_saturation_e, expose, mosaic
+from camera_models.sensor import SensorSettings, cfa_channels, emva_saturation_e, mosaic
+from camera_models.sensor_paths import expose
 from scenes import spectra
 
 

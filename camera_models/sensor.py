@@ -14,7 +14,8 @@ For each pixel (channel c set by the CFA, full-frame parity):
 
 Fixed-pattern noise is a property of the sensor: it comes from a counter-based hash of
 (pixel column, pixel row, the body's ``fixed_pattern_seed``), so any crop of the frame
-sees the same pattern. Two implementations draw the temporal noise (:data:`SENSOR_PATHS`): fused Dr.Jit kernels
+sees the same pattern. Two implementations draw the temporal noise
+(:data:`camera_models.sensor_paths.SENSOR_PATHS`): fused Dr.Jit kernels
 (:mod:`camera_models.sensor_kernel`, the default where Dr.Jit has its LLVM or CUDA backend)
 and numpy (:func:`expose_numpy`, ``numpy.random.Generator(PCG64(seed))``, the step-by-step
 reference). They draw from the same distributions (tests/camera_models/test_sensor_equivalence.py),
@@ -245,71 +246,6 @@ def expose_numpy(
 
 def _blocks(rows: int) -> list[slice]:
     return [slice(r0, min(r0 + _ROWS, rows)) for r0 in range(0, rows, _ROWS)]
-
-
-def _expose_drjit(*args, **kwargs) -> NDArray[np.uint16]:
-    from camera_models.sensor_kernel import expose_drjit  # imports Dr.Jit: only when used
-
-    return expose_drjit(*args, **kwargs)
-
-
-SENSOR_PATHS = {"drjit": _expose_drjit, "numpy": expose_numpy}
-"""The implementations of the sensor model: ``drjit`` (fused kernels,
-:mod:`camera_models.sensor_kernel`) and ``numpy`` (the step-by-step reference). They draw from
-the same distributions (tests/camera_models/test_sensor_equivalence.py), not the same numbers."""
-
-
-def default_sensor_path() -> str:
-    """``drjit`` where Dr.Jit has a fast backend (LLVM or CUDA), else ``numpy`` (logged once)."""
-    from camera_models.sensor_kernel import available
-
-    if available():
-        return "drjit"
-    _log_numpy_fallback()
-    return "numpy"
-
-
-@lru_cache(maxsize=1)
-def _log_numpy_fallback() -> None:
-    import logging
-
-    logging.getLogger("beacon_sim").warning(
-        "sensor: no fast Dr.Jit backend (libLLVM >= 16 or CUDA); using the slower numpy sensor path"
-    )
-
-
-def expose(
-    mean_electrons: NDArray[np.float64],
-    sensor: SensorModel,
-    settings: SensorSettings,
-    seed: int,
-    x0: int = 0,
-    y0: int = 0,
-    *,
-    path: str | None = None,
-) -> NDArray[np.uint16]:
-    """Raw frame (DN, uint16) from the mean photo-electrons of each pixel.
-
-    Parameters
-    ----------
-    mean_electrons
-        (rows, columns) mean photo-electrons of each pixel behind its own colour filter
-        (use :func:`mosaic` to pick them from per-channel images), e⁻.
-    sensor
-        Sensor parameters.
-    settings
-        Exposure time and analog gain.
-    seed
-        Seed of the temporal noise (same seed and path → same bytes).
-    x0, y0
-        Frame position of the crop's top-left pixel (for the fixed pattern).
-    path
-        A key of :data:`SENSOR_PATHS`; default :func:`default_sensor_path`.
-    """
-    key = default_sensor_path() if path is None else path
-    if key not in SENSOR_PATHS:
-        raise ValueError(f"path: expected one of {', '.join(SENSOR_PATHS)}, got {path!r}")
-    return SENSOR_PATHS[key](mean_electrons, sensor, settings, seed, x0, y0)
 
 
 def mosaic(rgb: NDArray[np.float64], cfa: str, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from camera_models.camera import SensorModel
+from camera_models.sensor import _pixel_patterns_of, bloom_in_place
 
 __all__ = ["INVERSION_MAX_E", "available", "expose_drjit", "poisson"]
 
@@ -93,8 +94,6 @@ def _patterns_on_device(
     seed: int, prnu: float, dsnu_dark: float, dsnu_offset: float, x0: int, y0: int, height: int, width: int
 ):
     """The fixed-pattern factors of :func:`camera_models.sensor._pixel_patterns_of`, as Dr.Jit arrays."""
-    from camera_models.sensor import _pixel_patterns_of
-
     m = _backend()
     return tuple(
         m.Float(np.ascontiguousarray(a).ravel())
@@ -183,8 +182,6 @@ def expose_drjit(
     docstring for the algorithm and its one stated approximation.
     """
     import drjit as dr
-
-    from camera_models.sensor import bloom_in_place
 
     settings.validate()
     m = _backend()

@@ -203,7 +203,8 @@ def whole_frame_paths(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict
     from camera_models.isp import process
     from camera_models.isp_reference import reference_process
     from camera_models.optics import optical_image
-    from camera_models.sensor import SensorSettings, expose
+    from camera_models.sensor import SensorSettings
+    from camera_models.sensor_paths import expose
     from scenes.background import render_background
 
     out = {}

@@ -9,7 +9,8 @@ from camera_models.camera import load_camera
 from camera_models.capture import capture
 from camera_models.exposure import manual_exposure
 from camera_models.isp import encode_jpeg
-from camera_models.sensor import SensorSettings, expose
+from camera_models.sensor import SensorSettings
+from camera_models.sensor_paths import expose
 from scenes import spectra
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 

@@ -18,8 +18,9 @@ import pytest
 from scipy import stats
 
 from camera_models.camera import load_camera
-from camera_models.sensor import SensorSettings, expose
+from camera_models.sensor import SensorSettings
 from camera_models.sensor_kernel import INVERSION_MAX_E, available, poisson
+from camera_models.sensor_paths import expose
 
 pytestmark = pytest.mark.skipif(not available(), reason="no fast Dr.Jit backend (libLLVM >= 16 or CUDA)")
 

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from studies.engine.frame import capture_frame, frame_inputs, render_batch_key
+from studies.engine.frame import FRAME_VERSION, capture_frame, frame_inputs, render_batch_key
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
 
 TINY = {"spp": 2, "oversampling": 1, "crop": "target", "near_field_spp": 64}
@@ -109,7 +109,7 @@ def test_comparison_table_on_the_issue_condition(tmp_path):
     assert tuple(table.columns) == ROW_COLUMNS and len(table) == 2
     assert tuple(pd.read_csv(result.paths["summary"]).columns) == SUMMARY_COLUMNS
     document = json.loads(result.paths["json"].read_text())
-    assert document["settings"]["frame_version"] == 4 and len(document["rows"]) == 2
+    assert document["settings"]["frame_version"] == FRAME_VERSION and len(document["rows"]) == 2
 
 
 @pytest.mark.slow

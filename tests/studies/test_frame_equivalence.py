@@ -17,8 +17,9 @@ from camera_models.camera import load_camera
 from camera_models.exposure import auto_exposure, manual_exposure
 from camera_models.isp import process
 from camera_models.isp_reference import reference_process
-from camera_models.sensor import SensorSettings, expose
+from camera_models.sensor import SensorSettings
 from camera_models.sensor_kernel import available
+from camera_models.sensor_paths import expose
 from pipeline.angles import Intrinsics
 from pipeline.detect import TRACKERS
 
