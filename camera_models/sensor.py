@@ -187,19 +187,7 @@ def expose_numpy(
     (two read-noise draws, numpy's Poisson sampler), and the path where Dr.Jit has no fast
     backend.
 
-    Parameters
-    ----------
-    mean_electrons
-        (rows, columns) mean photo-electrons of each pixel behind its own colour filter
-        (use :func:`mosaic` to pick them from per-channel images), e⁻.
-    sensor
-        Sensor parameters.
-    settings
-        Exposure time and analog gain.
-    seed
-        Seed of the temporal noise.
-    x0, y0
-        Frame position of the crop's top-left pixel (for the fixed pattern).
+    Arguments as :func:`camera_models.sensor_paths.expose`.
 
     Notes
     -----

@@ -58,7 +58,7 @@ def _same_distribution(a: np.ndarray, b: np.ndarray) -> float:
     return float(stats.mannwhitneyu(a, b, alternative="two-sided").pvalue)
 
 
-@pytest.mark.parametrize("name", ["logitech-c270", "spedal-920"])
+@pytest.mark.parametrize("name", ["logitech-c270", pytest.param("spedal-920", marks=pytest.mark.slow)])
 def test_false_blobs_per_dark_webcam_frame_agree(name):
     counts = _blob_counts(name, FRAMES)
     for tracker in TRACKERS:
