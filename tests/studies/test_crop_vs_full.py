@@ -83,8 +83,9 @@ def test_noiseless_whole_frame_holds_the_crop_pixel_for_pixel():
 @pytest.mark.usefixtures("mitsuba_variant")
 def test_comparison_table_on_the_issue_condition(tmp_path):
     """C270, 3 m, 2 mA, one seed: both paths' rows, recounted; the whole frame at maximum gain
-    gives the trackers many more blobs than the crop (the noiseless test above shows the pixels
-    inside the crop agree, so the extra blobs are the frame's noise outside it)."""
+    gives the trackers more blobs than the crop (the noiseless test above shows the pixels
+    inside the crop agree, so the extra blobs are the frame's noise outside it; the best
+    tracker's noise-aware threshold keeps them to tens: 26 against 9, measured)."""
     from studies.experiments.crop_vs_full import ROW_COLUMNS, SUMMARY_COLUMNS, run
 
     result = run(tmp_path, cameras=["logitech-c270"], ranges_m=[3.0], seeds=1, currents_mA=[2.0], render=TINY)
@@ -95,7 +96,7 @@ def test_comparison_table_on_the_issue_condition(tmp_path):
         assert r["pixels_crop"] == radiance.grid.width * radiance.grid.height
         assert r["seconds_full"] > 0 and r["seconds_crop"] > 0
     best = result.rows[1]
-    assert best["blobs_full"] >= best["blobs_crop"] + 50
+    assert best["blobs_crop"] < best["blobs_full"] < best["blobs_crop"] + 50
     (s_thesis, s_best) = result.summary
     assert (s_best["frames"], s_best["correct_crop"], s_best["correct_full"]) == (
         1,
