@@ -240,22 +240,39 @@ def crop_box(scenario: Scenario) -> CropBox:
     return CropBox(x0, y0, x1 - x0, y1 - y0)
 
 
-def scene_spec(scenario: Scenario) -> dict:
-    """Plain-data description of everything Mitsuba renders for ``scenario``."""
-    design, env, geom, settings = scenario.design, scenario.env, scenario.geometry, scenario.render
+def sensor_spec(scenario: Scenario) -> dict:
+    """The camera of a scene spec: pose, field of view, oversampled film and the crop."""
+    geom, s = scenario.geometry, scenario.render.oversampling
     pose = scenario.camera_pose()
     crop = crop_box(scenario)
-    s = settings.oversampling
+    return {
+        "position": pose.position_m.tolist(),
+        "target": (pose.position_m + pose.rotation[2]).tolist(),
+        "up": (-pose.rotation[1]).tolist(),
+        "fov_x_deg": math.degrees(2 * math.atan(geom.width_px / (2 * geom.focal_length_px))),
+        "film": [geom.width_px * s, geom.height_px * s],
+        "crop": [crop.x0 * s, crop.y0 * s, crop.width * s, crop.height * s],
+    }
+
+
+def room_spec(scenario: Scenario) -> dict:
+    """The scene of :func:`scene_spec` without the beacon: the room (and its luminous
+    ceiling) seen by the same camera; path length that of the ambient light."""
+    env = scenario.env
+    return {
+        "sensor": sensor_spec(scenario),
+        "materials": {"wall": env.wall_reflectance, "floor": env.floor_reflectance},
+        "shapes": environment_shapes(scenario),
+        "max_depth": scenario.render.ambient_max_depth,
+    }
+
+
+def scene_spec(scenario: Scenario) -> dict:
+    """Plain-data description of everything Mitsuba renders for ``scenario``."""
+    design, env, settings = scenario.design, scenario.env, scenario.render
     shapes, face_materials = beacon_shapes(scenario)
     return {
-        "sensor": {
-            "position": pose.position_m.tolist(),
-            "target": (pose.position_m + pose.rotation[2]).tolist(),
-            "up": (-pose.rotation[1]).tolist(),
-            "fov_x_deg": math.degrees(2 * math.atan(geom.width_px / (2 * geom.focal_length_px))),
-            "film": [geom.width_px * s, geom.height_px * s],
-            "crop": [crop.x0 * s, crop.y0 * s, crop.width * s, crop.height * s],
-        },
+        "sensor": sensor_spec(scenario),
         "materials": {
             "housing_white": design.housing_reflectance["white"],
             "housing_black": design.housing_reflectance["black"],

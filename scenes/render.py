@@ -29,6 +29,7 @@ from scenes.assemble import (
     scene_spec,
     to_mitsuba,
 )
+from scenes.direct_view import FaceDisc, face_discs, render_direct, render_scattered, set_film_crop, shape_groups
 from scenes.led import led_for_side
 from scenes.mitsuba_variant import select_variant
 from scenes.near_field import exit_spectral_factor
@@ -62,10 +63,19 @@ def pixel_grid(scenario: Scenario) -> PixelGrid:
     )
 
 
+DIRECT_VERSION = 1
+"""Bump when a change to :mod:`scenes.direct_view` changes its rendered values."""
+
+
 def render_key(scenario: Scenario, variant: str, groups: list[str]) -> str:
-    """Cache key of the unit-scale render of ``groups`` of ``scenario``."""
+    """Cache key of the unit-scale render of ``groups`` of ``scenario``.
+
+    ``direct = "path"`` keeps the key of the renders before :mod:`scenes.direct_view`."""
     r = scenario.render
-    return content_key(RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed, groups)
+    parts: list = [RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed, groups]
+    if r.direct != "path":
+        parts += [{"direct": r.direct, "version": DIRECT_VERSION, "scatter_spp": r.scatter_spp}]
+    return content_key(*parts)
 
 
 def render(
@@ -99,9 +109,24 @@ def render(
         raise ValueError(f"groups: expected some of {available}, got unknown {sorted(unknown)}")
     key = render_key(scenario, variant, groups)
 
+    settings = scenario.render
+
     def make() -> dict[str, np.ndarray]:
         t0 = time.perf_counter()
-        unit = render_unit_groups(spec, scenario.render.spp, scenario.render.seed, groups)
+        if settings.direct == "primary":
+            crop = crop_box(scenario)
+            faces = face_discs(scenario, crop.x0, crop.y0)
+            unit = render_unit_groups(
+                spec,
+                settings.spp,
+                settings.seed,
+                groups,
+                faces=faces,
+                scatter_spp=settings.scatter_spp,
+                oversampling=settings.oversampling,
+            )
+        else:
+            unit = render_unit_groups(spec, settings.spp, settings.seed, groups)
         log.info("rendered %s in %.1f s (%s)", list(unit), time.perf_counter() - t0, variant)
         return unit
 
@@ -159,7 +184,15 @@ def side_current_mA(scenario: Scenario, side: str) -> float:
 
 
 def render_unit_groups(
-    spec: dict, spp: int, seed: int, groups: Sequence[str] | None = None, *, reuse_kernels: bool = True
+    spec: dict,
+    spp: int,
+    seed: int,
+    groups: Sequence[str] | None = None,
+    *,
+    reuse_kernels: bool = True,
+    faces: list[FaceDisc] | None = None,
+    scatter_spp: int = 4,
+    oversampling: int = 1,
 ) -> dict[str, np.ndarray]:
     """Render each emitter group of ``spec`` (or those in ``groups``) alone at unit scale.
 
@@ -178,6 +211,15 @@ def render_unit_groups(
         JIT variants: render through :func:`_render_primal`, whose kernel does not depend
         on the crop, so a new geometry reuses the kernel compiled for an earlier one (same
         pixels as ``mitsuba.render``); ``False`` renders with ``mitsuba.render``.
+    faces
+        The lit faces projected on the crop (:func:`scenes.direct_view.face_discs`): given,
+        the LED groups (``led:*``) are the direct view by primary rays
+        (:func:`scenes.direct_view.render_direct`) plus the scattered light path-traced at
+        ``scatter_spp`` samples per camera pixel (:func:`scenes.direct_view.render_scattered`,
+        seed as above); ``None`` path-traces them at ``spp``. ``ambient`` is path-traced.
+    scatter_spp, oversampling
+        Samples per camera pixel of the scattered light and sub-pixels per camera pixel
+        along each axis (with ``faces``).
 
     Returns
     -------
@@ -190,6 +232,10 @@ def render_unit_groups(
 
     wanted = [(i, g) for i, g in enumerate(emitter_groups(spec)) if groups is None or g in groups]
     out: dict[str, np.ndarray] = {}
+    if faces is not None and mi.variant().startswith("scalar"):
+        raise ValueError(
+            "direct: expected a JIT (llvm/cuda) Mitsuba variant for 'primary'; use direct='path' in scalar mode"
+        )
     if mi.variant().startswith("scalar"):
         # no kernel to reuse in scalar mode, and Python plugins' parameters cannot be
         # updated there: load one scene per group with only that group's emitters
@@ -214,6 +260,19 @@ def render_unit_groups(
             prefix = f"shape_{i:04d}.emitter.radiance"
             key = prefix if prefix in params else f"{prefix}.value"
             by_group.setdefault(shape["emitter"]["group"], []).append((key, shape["emitter"]["radiance"]))
+    direct: dict[str, np.ndarray] = {}
+    if faces is not None:
+        # one pass of primary rays for every LED group: each ray's emission goes to the
+        # group of the face it hit
+        led_groups = [g for _, g in wanted if g.startswith("led:")]
+        for other, entries in by_group.items():
+            for key, value in entries:
+                params[key] = dr.opaque(mi.Float, value if other in led_groups else 0.0)
+        params.update()
+        crop = tuple(int(v) for v in spec["sensor"]["crop"])
+        images, _ = render_direct(scene, crop, faces, shape_groups(scene, spec, led_groups))
+        direct = {g: images[k] for k, g in enumerate(led_groups)} if images.shape[0] else {}
+        direct.update({g: np.zeros(images.shape[1:], np.float32) for g in led_groups if g not in direct})
     for index, group in wanted:
         for other, entries in by_group.items():
             for key, value in entries:
@@ -221,6 +280,10 @@ def render_unit_groups(
                 params[key] = dr.opaque(mi.Float, value if other == group else 0.0)
         params.update()
         group_seed = seed * 7919 + index
+        if group in direct:
+            scattered = render_scattered(scene, crop, oversampling, scatter_spp, group_seed, int(spec["max_depth"]))
+            out[group] = np.ascontiguousarray(direct[group] + scattered, dtype=np.float32)
+            continue
         if reuse_kernels:
             image = np.asarray(_render_primal(scene, group_seed, spp))
         else:
@@ -315,13 +378,13 @@ def _render_primal(scene: mi.Scene, seed: int, spp: int) -> mi.TensorXf:
         # the perspective camera adds film size × principal point offset / crop size (zero
         # here) with the crop size as a literal: trace it with the full frame as the film's
         # crop; the camera keeps the sample-to-camera transform of the real crop
-        _set_crop(film, mi.ScalarPoint2u(0, 0), film.size())
+        set_film_crop(film, mi.ScalarPoint2u(0, 0), film.size())
         try:
             ray, ray_weight = sensor.sample_ray_differential(
                 mi.Float(sensor.shutter_open()), mi.Float(0.0), adjusted_pos, mi.Point2f(0.5)
             )
         finally:
-            _set_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
+            set_film_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
         ray.scale_differential(float(np.float32(1.0) / np.sqrt(np.float32(spp))))
         radiance, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
         value = mi.unpolarized_spectrum(ray_weight * radiance)
@@ -351,14 +414,3 @@ def _block_reduce_mode(llvm: bool, n_entries: int, expand_threshold: int, scatte
     if llvm and n_entries <= expand_threshold:
         return dr.ReduceMode.Expand
     return dr.ReduceMode.Local if scatter_reduce_local else dr.ReduceMode.Direct
-
-
-def _set_crop(film: mi.Film, offset: mi.ScalarPoint2u, size: mi.ScalarVector2u) -> None:
-    """Set a ``mitsuba.Film``'s crop window (offset and size in film pixels) without
-    notifying its sensor."""
-    import mitsuba as mi
-
-    params = mi.traverse(film)
-    params["crop_offset"] = offset
-    params["crop_size"] = size
-    params.update()

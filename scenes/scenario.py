@@ -53,6 +53,20 @@ class RenderSettings:
     near_field_spp
         Samples per pixel of the near-field marker renders (diffusers), cached per
         configuration.
+    direct
+        How the LEDs' light is rendered: ``primary`` (default), the lit faces' direct view
+        by deterministic primary rays (:mod:`scenes.direct_view`, no Monte-Carlo noise)
+        plus the light the room, beacon and housings scatter, path-traced at
+        ``scatter_spp``; ``path``, everything path-traced at ``spp`` (the reference, and
+        the renders before issue 24). The ambient light is path-traced at ``spp`` in both.
+    scatter_spp
+        With ``direct = "primary"``: path-traced samples per *camera* pixel of the
+        scattered LED light (~0.07 % of the marker flux).
+    background
+        The low-resolution whole-frame background (:mod:`scenes.background`): ``room``
+        (default), the room without the beacon, rendered once per camera, environment and
+        band of range, yaw and camera height; ``geometry``, the whole scene rendered for
+        every geometry (the reference, and the backgrounds before issue 24).
     """
 
     spp: int = 16
@@ -63,7 +77,14 @@ class RenderSettings:
     ambient_max_depth: int = 6
     crop: str = "beacon"
     near_field_spp: int = 1024
+    direct: str = "primary"
+    scatter_spp: int = 1
+    background: str = "room"
 
+    DIRECT_MODES = ("primary", "path")
+    """Values of :attr:`direct`."""
+    BACKGROUND_MODES = ("room", "geometry")
+    """Values of :attr:`background`."""
     MAX_SPP = 65536
     """Monte-Carlo noise falls as 1/√spp: at 2^16 samples it is 1/256 of one sample's, far
     below any sensor's shot noise, while the work (crop × oversampling² × spp) keeps growing."""
@@ -88,6 +109,7 @@ class RenderSettings:
             "led_max_depth": 64,
             "ambient_max_depth": 64,
             "near_field_spp": 2**20,
+            "scatter_spp": self.MAX_SPP,
         }
         for name, most in limits.items():
             v = getattr(self, name)
@@ -98,6 +120,12 @@ class RenderSettings:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or not 0 <= self.seed <= self.MAX_SEED:
             raise ScenarioError(
                 f"seed: expected an integer in [0, {self.MAX_SEED}] (renderer seeds are 32-bit), got {self.seed!r}"
+            )
+        if self.direct not in self.DIRECT_MODES:
+            raise ScenarioError(f"direct: expected one of {', '.join(self.DIRECT_MODES)}, got {self.direct!r}")
+        if self.background not in self.BACKGROUND_MODES:
+            raise ScenarioError(
+                f"background: expected one of {', '.join(self.BACKGROUND_MODES)}, got {self.background!r}"
             )
         if self.crop not in ("beacon", "target"):
             raise ScenarioError(f"crop: expected 'beacon' or 'target', got {self.crop!r}")
