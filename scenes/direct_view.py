@@ -361,5 +361,9 @@ def render_scattered(
             set_film_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
         radiance, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
         value = np.asarray(mi.unpolarized_spectrum(weight * radiance)[0], dtype=np.float64)
-    per_pixel = value.reshape(ph, pw, spp).mean(axis=2).astype(np.float32)
+    per_pixel = value.reshape(ph, pw, spp).mean(axis=2)
+    # below float32's smallest normal number: zero (a subnormal keeps too few bits to be
+    # scaled by the LED drive exactly)
+    per_pixel[np.abs(per_pixel) < np.finfo(np.float32).tiny] = 0.0
+    per_pixel = per_pixel.astype(np.float32)
     return np.repeat(np.repeat(per_pixel, s, axis=0), s, axis=1)

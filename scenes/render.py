@@ -9,6 +9,11 @@ yaw and crop, in this process and (through its disk cache) in later ones. Render
 cached on disk by a content hash of the scene description, render settings, Mitsuba
 variant and :data:`RENDER_VERSION`; the LED drive and the ambient level are not part of
 the key because they only scale the cached unit images (linearity).
+
+With ``RenderSettings.direct = "primary"`` (the default) the LED groups are not
+path-traced: their direct view comes from deterministic primary rays, all groups in one
+pass, and only their scattered light from the path tracer at ``scatter_spp`` samples per
+camera pixel (:mod:`scenes.direct_view`); ``direct = "path"`` is the reference.
 """
 
 from __future__ import annotations
@@ -67,13 +72,20 @@ DIRECT_VERSION = 1
 """Bump when a change to :mod:`scenes.direct_view` changes its rendered values."""
 
 
+def uses_primary_rays(scenario: Scenario, variant: str) -> bool:
+    """Whether ``scenario`` renders its LEDs' direct view by primary rays: ``direct =
+    "primary"`` in a JIT variant (the scalar fallback, which cannot update a loaded scene's
+    emitters, path-traces everything)."""
+    return scenario.render.direct == "primary" and not variant.startswith("scalar")
+
+
 def render_key(scenario: Scenario, variant: str, groups: list[str]) -> str:
     """Cache key of the unit-scale render of ``groups`` of ``scenario``.
 
     ``direct = "path"`` keeps the key of the renders before :mod:`scenes.direct_view`."""
     r = scenario.render
     parts: list = [RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed, groups]
-    if r.direct != "path":
+    if uses_primary_rays(scenario, variant):
         parts += [{"direct": r.direct, "version": DIRECT_VERSION, "scatter_spp": r.scatter_spp}]
     return content_key(*parts)
 
@@ -113,7 +125,7 @@ def render(
 
     def make() -> dict[str, np.ndarray]:
         t0 = time.perf_counter()
-        if settings.direct == "primary":
+        if uses_primary_rays(scenario, variant):
             crop = crop_box(scenario)
             faces = face_discs(scenario, crop.x0, crop.y0)
             unit = render_unit_groups(

@@ -58,7 +58,8 @@ class RenderSettings:
         by deterministic primary rays (:mod:`scenes.direct_view`, no Monte-Carlo noise)
         plus the light the room, beacon and housings scatter, path-traced at
         ``scatter_spp``; ``path``, everything path-traced at ``spp`` (the reference, and
-        the renders before issue 24). The ambient light is path-traced at ``spp`` in both.
+        the renders before issue 24). The ambient light is path-traced at ``spp`` in both;
+        the scalar fallback variant path-traces everything.
     scatter_spp
         With ``direct = "primary"``: path-traced samples per *camera* pixel of the
         scattered LED light (~0.07 % of the marker flux).
