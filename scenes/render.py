@@ -68,6 +68,12 @@ def pixel_grid(scenario: Scenario) -> PixelGrid:
     )
 
 
+NEGLIGIBLE_UNIT_RADIANCE = 1e-30
+"""Unit radiance (W·m⁻²·sr⁻¹ per W·sr⁻¹ of LED intensity) below which a primary-ray render
+stores zero: the far tail of a cos¹⁹ beam seen edge-on reaches 1e-38 and below, where
+float32 turns subnormal and the LED-drive scaling would lose its exactness. Assumed: at
+1e-30 a 1 W·sr⁻¹ LED gives less than one photo-electron per 10⁹ years in any camera here."""
+
 DIRECT_VERSION = 1
 """Bump when a change to :mod:`scenes.direct_view` changes its rendered values."""
 
@@ -294,7 +300,9 @@ def render_unit_groups(
         group_seed = seed * 7919 + index
         if group in direct:
             scattered = render_scattered(scene, crop, oversampling, scatter_spp, group_seed, int(spec["max_depth"]))
-            out[group] = np.ascontiguousarray(direct[group] + scattered, dtype=np.float32)
+            image = np.ascontiguousarray(direct[group] + scattered, dtype=np.float32)
+            image[np.abs(image) < NEGLIGIBLE_UNIT_RADIANCE] = 0.0
+            out[group] = image
             continue
         if reuse_kernels:
             image = np.asarray(_render_primal(scene, group_seed, spp))
