@@ -48,6 +48,9 @@ def marker_measures(radiance: SpectralRadiance, scenario: Scenario, radius_px: f
     for k, (a, b) in enumerate(uv):
         sel = (nearest == k) & (d2[k] <= radius_px**2)
         flux = weighted[sel].sum()
+        if flux <= 0:  # a marker seen from behind (not compared)
+            out.append((0.0, np.nan, np.nan))
+            continue
         out.append((flux, (weighted[sel] * uu[sel]).sum() / flux - a, (weighted[sel] * vv[sel]).sum() / flux - b))
     return np.array(out)
 
