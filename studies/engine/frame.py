@@ -64,14 +64,17 @@ from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
-FRAME_VERSION = 5
+FRAME_VERSION = 6
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.
 4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
 and ``blobs`` (every blob the tracker found); ``align_px`` is ignored on whole frames, and an aligned
 crop's unit render is padded with it (it was not: the lens saw the render shifted by the padding).
 5: the sensor's noise from the Dr.Jit kernels and the ISP on 16-bit values (issue 24: new random
-streams, the same distributions)."""
+streams, the same distributions).
+6: the lit faces' direct view by primary rays and the room background once per band
+(:mod:`scenes.direct_view`, ``RenderSettings.direct``/``background``); the best tracker's
+noise-aware threshold (issue 24)."""
 
 
 def frame_scenario(task: dict):
