@@ -65,10 +65,11 @@ DECISION_LABEL = {"decision": "frames that decided it"}
 
 
 def default_options(quick: bool) -> StudyOptions:
-    """Full grid, or the quick one the main job runs."""
+    """Full grid, or the quick one the main job runs (every built-in camera, so the main job states
+    each one's far limit at 0° and 30°)."""
     if quick:
         return StudyOptions(
-            cameras=("canon-t6-18mm", "logitech-c270"),
+            cameras=("canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920"),
             yaws_deg=(0.0, 30.0),
             ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0),
             currents_mA=(2.0,),

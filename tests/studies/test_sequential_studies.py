@@ -19,8 +19,8 @@ from studies.engine.sequential import SequentialDesign
 from tests.studies.test_cli_edges import assert_one_line_error, invoke, patch_work
 
 T6, C270 = "canon-t6-18mm", "logitech-c270"
-TRUTH = {T6: (14.0, 0.6), C270: (8.0, 0.5)}
-"""(r₅₀, s) of each camera's fake logistic fall-off, m: far limits 12.2 m and 6.5 m."""
+TRUTH = {T6: (14.0, 0.6), "canon-t6-10mm": (9.0, 0.4), C270: (8.0, 0.5), "spedal-920": (5.0, 0.3)}
+"""(r₅₀, s) of each camera's fake logistic fall-off, m: far limits 12.2, 7.8, 6.5 and 4.1 m."""
 CHROMA = {"red": (0.6, 0.3), "green": (0.2, 0.7)}
 
 
@@ -75,9 +75,9 @@ def fake(monkeypatch):
 def test_range_limit_decides_each_far_limit_and_says_with_how_many_frames(fake, tmp_path):
     options = range_limit.default_options(True)
     design = range_limit.default_design(True)
-    assert design.target_relative == 0.2 and design.budget_frames == 480
+    assert design.target_relative == 0.2 and design.budget_frames == 120 * 8
     summary = range_limit.run(tmp_path, options, design=design)
-    assert summary["design"]["frames"] <= 480 and (tmp_path / "design.json").is_file()
+    assert summary["design"]["frames"] <= 960 and (tmp_path / "design.json").is_file()
     frames = pd.read_parquet(tmp_path / "results.parquet")
     assert len(frames) == 2 * summary["design"]["frames"]  # both trackers' rows of every frame
     for rec in summary["max_range"]:
@@ -92,7 +92,7 @@ def test_range_limit_decides_each_far_limit_and_says_with_how_many_frames(fake, 
     for rec in summary["max_range_thesis_tracker"]:
         assert rec["decision"] == f"{rec['frames']} frames (placed for the best tracker)"
     page = (tmp_path / "report.html").read_text()
-    assert "frames that decided it" in page and "4 of 4 far limits decided" in page
+    assert "frames that decided it" in page and "8 of 8 far limits decided" in page
     # the fixed-grid path is unchanged: no design fields
     fixed = range_limit.analyse(frames)
     assert "design" not in fixed and "decision" not in fixed["max_range"][0]
