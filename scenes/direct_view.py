@@ -69,6 +69,11 @@ area within ~1 % worst case, 0.2 % typical; see the module docstring)."""
 MAX_SAMPLES = 64
 """Most rays per refined sub-pixel along each axis (a face 0.75 sub-pixels across still
 spans 48 rays)."""
+SCATTER_BLOCK_PX = 2
+"""Camera pixels per side of a block of the scattered light's samples (assumed: that light,
+~0.07 % of a marker's flux, spreads over the housing, the beacon body and the room, so
+averaging it over 2 × 2 pixels moves no centroid by more than ~0.07 % of a pixel, while it
+quarters the path-traced samples, the largest share of a new geometry's render)."""
 EDGE_TOLERANCE = 1e-4
 """A sub-pixel is refined where its 3 × 3 neighbourhood's centre radiances differ by more
 than this fraction of the brightest (assumed: far below the 1 % flux accuracy asked of a marker, and far
@@ -299,15 +304,24 @@ def render_direct(
 
 
 def render_scattered(
-    scene: mi.Scene, crop: tuple[int, int, int, int], oversampling: int, spp: int, seed: int, max_depth: int
+    scene: mi.Scene,
+    crop: tuple[int, int, int, int],
+    oversampling: int,
+    spp: int,
+    seed: int,
+    max_depth: int,
+    *,
+    block_px: int = SCATTER_BLOCK_PX,
 ) -> NDArray[np.float32]:
     """Light scattered toward the camera (every path but the directly seen emission), on the crop.
 
     Mitsuba's ``path`` integrator with ``hide_emitters`` (a camera ray that meets an
     emitter gets none of its emission; the emitters still light the scene) and
-    ``max_depth`` path vertices, at ``spp`` jittered samples per *camera* pixel
-    (``oversampling``² sub-pixels): each camera pixel's mean is spread evenly over its
-    sub-pixels, which keeps every camera pixel's flux unbiased.
+    ``max_depth`` path vertices, at ``spp`` samples jittered over each *block* of
+    ``block_px`` × ``block_px`` camera pixels (``oversampling``² sub-pixels each; blocks
+    at the crop's right and bottom edges cover what is left of it): each block's mean is
+    spread evenly over its sub-pixels, which keeps every block's flux unbiased and blurs
+    the scattered light by at most a block (see :data:`SCATTER_BLOCK_PX`).
 
     Parameters
     ----------
@@ -318,11 +332,13 @@ def render_scattered(
     oversampling
         Sub-pixels per camera pixel along each axis.
     spp
-        Samples per camera pixel.
+        Samples per block of camera pixels.
     seed
         Sampler seed.
     max_depth
         Longest path (Mitsuba's ``max_depth``).
+    block_px
+        Camera pixels per block side (1: one block per camera pixel).
 
     Returns
     -------
@@ -337,22 +353,29 @@ def render_scattered(
     pw, ph = width // s, height // s
     if pw * s != width or ph * s != height:
         raise ValueError(f"crop: expected a size in whole camera pixels of {s} sub-pixels, got {width} × {height}")
+    b = int(block_px)
+    bw, bh = -(-pw // b), -(-ph // b)
+    # each block's extent in camera pixels (the last column and row of blocks may be narrower)
+    block_w = np.minimum(b, pw - b * np.arange(bw)).astype(np.float32)
+    block_h = np.minimum(b, ph - b * np.arange(bh)).astype(np.float32)
     integrator = mi.load_dict({"type": "path", "max_depth": int(max_depth), "hide_emitters": True})
     sampler = mi.load_dict({"type": "independent", "sample_count": int(spp)})
-    n = pw * ph * spp
+    n = bw * bh * spp
     sensor = scene.sensors()[0]
     film = sensor.film()
     with dr.suspend_grad():
         sampler.set_samples_per_wavefront(spp)
         sampler.seed(seed, n)
-        pixel = dr.arange(mi.UInt32, n) // dr.opaque(mi.UInt32, spp)
-        row = pixel // dr.opaque(mi.UInt32, pw)
-        col = pixel - row * dr.opaque(mi.UInt32, pw)
+        block = dr.arange(mi.UInt32, n) // dr.opaque(mi.UInt32, spp)
+        row = block // dr.opaque(mi.UInt32, bw)
+        col = block - row * dr.opaque(mi.UInt32, bw)
         jitter = sampler.next_2d()
-        # film position (crop-relative, normalised) of a point jittered over the camera pixel
+        extent_x = dr.gather(mi.Float, mi.Float(block_w), col)
+        extent_y = dr.gather(mi.Float, mi.Float(block_h), row)
+        # film position (crop-relative, normalised) of a point jittered over the block
         position = mi.Point2f(
-            (mi.Float(col) + jitter.x) * dr.opaque(mi.Float, s / width),
-            (mi.Float(row) + jitter.y) * dr.opaque(mi.Float, s / height),
+            (mi.Float(col) * b + jitter.x * extent_x) * dr.opaque(mi.Float, s / width),
+            (mi.Float(row) * b + jitter.y * extent_y) * dr.opaque(mi.Float, s / height),
         )
         set_film_crop(film, mi.ScalarPoint2u(0, 0), film.size())
         try:
@@ -361,9 +384,9 @@ def render_scattered(
             set_film_crop(film, mi.ScalarPoint2u(offset_x, offset_y), mi.ScalarVector2u(width, height))
         radiance, _, _ = integrator.sample(scene, sampler, ray, sensor.get_medium(), True)
         value = np.asarray(mi.unpolarized_spectrum(weight * radiance)[0], dtype=np.float64)
-    per_pixel = value.reshape(ph, pw, spp).mean(axis=2)
+    per_block = value.reshape(bh, bw, spp).mean(axis=2)
     # below float32's smallest normal number: zero (a subnormal keeps too few bits to be
     # scaled by the LED drive exactly)
-    per_pixel[np.abs(per_pixel) < np.finfo(np.float32).tiny] = 0.0
-    per_pixel = per_pixel.astype(np.float32)
-    return np.repeat(np.repeat(per_pixel, s, axis=0), s, axis=1)
+    per_block[np.abs(per_block) < np.finfo(np.float32).tiny] = 0.0
+    per_block = per_block.astype(np.float32)
+    return np.repeat(np.repeat(per_block, b * s, axis=0)[:height], b * s, axis=1)[:, :width]

@@ -74,8 +74,9 @@ stores zero: the far tail of a cos¹⁹ beam seen edge-on reaches 1e-38 and belo
 float32 turns subnormal and the LED-drive scaling would lose its exactness. Assumed: at
 1e-30 a 1 W·sr⁻¹ LED gives less than one photo-electron per 10⁹ years in any camera here."""
 
-DIRECT_VERSION = 1
-"""Bump when a change to :mod:`scenes.direct_view` changes its rendered values."""
+DIRECT_VERSION = 2
+"""Bump when a change to :mod:`scenes.direct_view` changes its rendered values (2: scattered
+light sampled per block of 2 × 2 camera pixels)."""
 
 
 def uses_primary_rays(scenario: Scenario, variant: str) -> bool:
