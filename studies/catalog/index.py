@@ -307,6 +307,7 @@ def write_index(out: Path, elapsed_s: float | None = None) -> dict:
     )
     rep.html(f"<ul>{links}</ul>")
     if elapsed_s is not None:
+        result["elapsed_s"] = round(float(elapsed_s), 1)
         rep.text(f"Finished in {elapsed_s:.0f} s.", note=True)
     rep.write(out / "index.html")
     atomic_write_bytes(out / "answers.json", json.dumps(result, indent=2, allow_nan=True).encode())

@@ -36,6 +36,7 @@ from camera_models.exposure import manual_exposure
 from camera_models.isp import encode_jpeg
 from pipeline.angles import Intrinsics
 from pipeline.detect import detect
+from scenes.background import render_background
 from scenes.beacon import SIDE_ANGLE_RAD, beacon_design
 from scenes.led import led_for_side
 from scenes.near_field import STATS, NearFieldSettings, housing_leak, marker_emission
@@ -44,9 +45,11 @@ from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
 from studies.catalog import replication
 from studies.engine.frame import render_batch_key, simulate_frame
+from studies.engine.run_log import total_seconds
 from studies.engine.runner import run_tasks, worker_threads
 from studies.engine.sweep import Execution, run_frames, sweep_in_chunks
 from studies.engine.tasks import GRID_AXES, RENDER, frame_tasks
+from studies.experiments import equivalence
 from studies.experiments.two_stage_check import MarkerView, brute_force_scene, render_passes, two_stage_scene
 
 
@@ -355,6 +358,12 @@ def _cold_renders(geometries: int) -> dict:
         scenario = Scenario(**{**BENCH_SCENARIO, "foam": foam, "paper_sheets": sheets}, render=RenderSettings(**RENDER))
         near_fields[label] = _near_field_seconds(scenario, scenario.side)
     render(Scenario(**BENCH_SCENARIO, render=RenderSettings(**RENDER)))  # the worker's first render, untimed
+    # the room's whole-frame background: none in the dark (zero, nothing rendered); in the lit
+    # room one render per camera and band of range, yaw and height (scenes.background)
+    lit = Scenario(**{**BENCH_SCENARIO, "environment": "lit-room"}, render=RenderSettings(**RENDER))
+    t0 = time.perf_counter()
+    render_background(lit)
+    room_background_s = time.perf_counter() - t0
     times: dict[str, list[float]] = {"reuse": [], "mitsuba_render": []}
     for k in range(geometries):
         geometry = {"range_m": 3.0 + 0.9 * k, "yaw_deg": -25.0 + 10.0 * k}
@@ -368,6 +377,7 @@ def _cold_renders(geometries: int) -> dict:
         "near_fields": near_fields,
         "cold_render_s": float(np.median(times["reuse"])),
         "cold_render_mitsuba_render_s": float(np.median(times["mitsuba_render"])),
+        "room_background_s": room_background_s,
         "ratio": float(np.median(times["mitsuba_render"]) / np.median(times["reuse"])),
         "each_s": times,
         "render": dict(RENDER),
@@ -762,4 +772,41 @@ def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: in
         "fits_s_on_workers": fit_s * groups.ngroups / workers,
         "parent_peak_rss_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "parent_peak_rss_after_templates_MiB": rss_templates,
+    }
+
+
+def equivalence_statistics(frames: int = 20) -> dict:
+    """The fast camera path against the reference: :func:`studies.experiments.equivalence.summary`
+    (photon transfer, dark-frame χ², false blobs on ``frames`` dark C270 frames per path)."""
+    return equivalence.summary(frames)
+
+
+RECORDED_RUNS = Path(__file__).resolve().parents[2] / "results"
+"""Where the recorded runs live: ``main-job/runs.json`` and ``full/<study>.runs.json``."""
+FULL_STUDIES = ("range-limit", "webcam-vs-dslr", "brightness-diffuser", "validate")
+
+
+def recorded_runs(folder: Path = RECORDED_RUNS) -> dict:
+    """Wall times of the runs too long to repeat in a benchmark, as their commands recorded
+    them (:mod:`studies.engine.run_log`): the main job cold on a fresh clone
+    (``main-job/runs.json``) and each full study cold (``full/<study>.runs.json``); None
+    where no record is kept. Each entry: seconds (the parts' sum), parts, frames."""
+
+    def entry(path: Path) -> dict | None:
+        if not path.is_file():
+            return None
+        parts = json.loads(path.read_text())["parts"]
+        return {
+            "s": total_seconds(parts),
+            "parts": len(parts),
+            "frames": parts[-1]["frames"],
+            "finished_utc": parts[-1]["finished_utc"],
+        }
+
+    studies = {name: entry(folder / "full" / f"{name}.runs.json") for name in FULL_STUDIES}
+    done = [v for v in studies.values() if v is not None]
+    return {
+        "main_job": entry(folder / "main-job" / "runs.json"),
+        "full_studies": studies,
+        "full_studies_s": sum(v["s"] for v in done) if len(done) == len(studies) else None,
     }

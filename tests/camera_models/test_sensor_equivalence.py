@@ -21,6 +21,8 @@ from camera_models.camera import load_camera
 from camera_models.sensor import SensorSettings
 from camera_models.sensor_kernel import INVERSION_MAX_E, available, poisson
 from camera_models.sensor_paths import expose
+from studies.experiments.equivalence import PTC_SHAPE as SHAPE
+from studies.experiments.equivalence import dark_histogram_p, photon_transfer
 
 pytestmark = pytest.mark.skipif(not available(), reason="no fast Dr.Jit backend (libLLVM >= 16 or CUDA)")
 
@@ -29,8 +31,6 @@ CAMERAS = {
     "logitech-c270": ({"gain_code": 0}, {"gain_code": 255}),
     "spedal-920": ({"gain_code": 0}, {"gain_code": 255}),
 }
-SHAPE = (8192, 64)
-"""Tall and narrow: 8192 rows, so the row-noise share of the variance is estimated to ~1.6 %."""
 
 
 def poisson_fit_p(counts: np.ndarray, mean: float) -> float:
@@ -78,14 +78,6 @@ def test_poisson_is_deterministic_and_seeded():
     m = np.full(10_000, 3.0, np.float32)
     assert np.array_equal(poisson(m, 1), poisson(m, 1))
     assert not np.array_equal(poisson(m, 1), poisson(m, 2))
-
-
-def photon_transfer(sensor, settings: SensorSettings, mean_e: float, path: str, seeds=(1, 2)) -> tuple[float, float]:
-    """(mean DN, temporal variance DN²) of a uniform exposure: EMVA 1288's pair method,
-    variance = var(A − B) / 2, which removes the fixed pattern."""
-    mu = np.full(SHAPE, mean_e, np.float32)
-    a, b = (expose(mu, sensor, settings, seed, path=path).astype(np.float64) for seed in seeds)
-    return float(0.5 * (a.mean() + b.mean())), float(np.var(a - b) / 2.0)
 
 
 def _levels(sensor, gain: float) -> list[float]:
@@ -174,23 +166,6 @@ def _louder(sensor, factor: float = 1.1):
         read_noise_e_at_base=sensor.read_noise_e_at_base * factor,
         read_noise_e_at_high_gain=sensor.read_noise_e_at_high_gain * factor,
     )
-
-
-def dark_histogram_p(a: np.ndarray, b: np.ndarray) -> float:
-    """p-value of a two-sample χ² test that two arrays of DN share one distribution (bins of ≥ 5 counts)."""
-    lo, hi = int(min(a.min(), b.min())), int(max(a.max(), b.max()))
-    ha = np.bincount(a.ravel() - lo, minlength=hi - lo + 1)
-    hb = np.bincount(b.ravel() - lo, minlength=hi - lo + 1)
-    keep_a, keep_b, acc_a, acc_b = [], [], 0, 0
-    for x, y in zip(ha, hb, strict=True):
-        acc_a, acc_b = acc_a + x, acc_b + y
-        if acc_a + acc_b >= 10:
-            keep_a.append(acc_a)
-            keep_b.append(acc_b)
-            acc_a = acc_b = 0
-    keep_a[-1] += acc_a
-    keep_b[-1] += acc_b
-    return float(stats.chi2_contingency(np.array([keep_a, keep_b]))[1])
 
 
 @pytest.mark.parametrize(("name", "setting"), [("canon-t6-18mm", {"iso": 6400}), ("logitech-c270", {"gain_code": 255})])

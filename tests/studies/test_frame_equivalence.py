@@ -8,74 +8,34 @@ rate inside the other's Wilson 95 % interval).
 
 from __future__ import annotations
 
-import cv2
-import numpy as np
 import pytest
 from scipy import stats
 
-from camera_models.camera import load_camera
-from camera_models.exposure import auto_exposure, manual_exposure
-from camera_models.isp import process
-from camera_models.isp_reference import reference_process
-from camera_models.sensor import SensorSettings
 from camera_models.sensor_kernel import available
-from camera_models.sensor_paths import expose
-from pipeline.angles import Intrinsics
 from pipeline.detect import TRACKERS
+from studies.experiments.equivalence import false_blob_comparison
 
 pytestmark = pytest.mark.skipif(not available(), reason="no fast Dr.Jit backend (libLLVM >= 16 or CUDA)")
 
 FRAMES = 50
 
 
-def dark_frame_blobs(name: str, seed: int, reference: bool) -> dict[str, int]:
-    """Blobs each tracker finds on a dark whole frame (no light; the camera's exposure for the dark)."""
-    cam = load_camera(name)
-    ex = auto_exposure(cam, lambda t, g: 0.0) if cam.exposure.mode == "auto" else manual_exposure(cam)
-    g = cam.geometry
-    mean = np.zeros((g.height_px, g.width_px), np.float32)
-    settings = SensorSettings(ex.exposure_s, ex.analog_gain)
-    raw = expose(mean, cam.sensor, settings, seed, path="numpy" if reference else "drjit")
-    img = reference_process(raw, cam) if reference else process(raw, cam, analog_gain=ex.analog_gain)
-    bgr = cv2.imdecode(np.frombuffer(img.jpeg, np.uint8), cv2.IMREAD_COLOR)
-    intr = Intrinsics.from_geometry(g)
-    return {t: len(TRACKERS[t](bgr, intr, (0, 0), {"beacon": "v2"}).blobs) for t in TRACKERS}
-
-
-def _blob_counts(name: str, frames: int) -> dict[bool, dict[str, np.ndarray]]:
-    out = {}
-    for reference in (True, False):
-        rows = [dark_frame_blobs(name, 1000 + k, reference) for k in range(frames)]
-        out[reference] = {t: np.array([r[t] for r in rows]) for t in TRACKERS}
-    return out
-
-
-def _same_distribution(a: np.ndarray, b: np.ndarray) -> float:
-    """p-value that two samples of counts share one distribution (two-sided Mann-Whitney U;
-    1 when both are constant and equal)."""
-    if np.all(a == a[0]) and np.all(b == a[0]):
-        return 1.0
-    return float(stats.mannwhitneyu(a, b, alternative="two-sided").pvalue)
-
-
-@pytest.mark.parametrize("name", ["logitech-c270", pytest.param("spedal-920", marks=pytest.mark.slow)])
-def test_false_blobs_per_dark_webcam_frame_agree(name):
-    counts = _blob_counts(name, FRAMES)
-    for tracker in TRACKERS:
-        old, new = counts[True][tracker], counts[False][tracker]
-        p = _same_distribution(old, new)
-        print(name, tracker, f"blobs per dark frame: reference {old.mean():.1f}, fast {new.mean():.1f}, p = {p:.3f}")
-        assert p > 1e-3
-
-
-@pytest.mark.slow
-def test_false_blobs_per_dark_t6_frame_agree():
-    counts = _blob_counts("canon-t6-18mm", FRAMES)
-    for tracker in TRACKERS:
-        old, new = counts[True][tracker], counts[False][tracker]
-        p = _same_distribution(old, new)
-        print("canon-t6-18mm", tracker, f"reference {old.mean():.1f}, fast {new.mean():.1f}, p = {p:.3f}")
-        assert p > 1e-3
+@pytest.mark.parametrize(
+    "name",
+    [
+        "logitech-c270",
+        pytest.param("spedal-920", marks=pytest.mark.slow),
+        pytest.param("canon-t6-18mm", marks=pytest.mark.slow),
+    ],
+)
+def test_false_blobs_per_dark_whole_frame_agree(name):
+    for tracker, c in false_blob_comparison(name, FRAMES).items():
+        print(
+            name,
+            tracker,
+            f"blobs per dark frame: reference {c['reference_mean']:.1f}, fast {c['fast_mean']:.1f}, p = {c['p']:.3f}",
+        )
+        assert c["p"] > 1e-3
 
 
 def wilson(k: int, n: int) -> tuple[float, float]:

@@ -1,0 +1,66 @@
+"""A command's wall time, kept beside its outputs so a resumed run's parts add up.
+
+Every study, ``validate`` and the main job append one *part* to ``<out>/runs.json`` when
+they finish: when it ended (UTC), its wall time and the frames stored in the output folder
+at that moment. A run cut by a session end and resumed has two parts; its time is their
+sum. ``beacon-sim bench`` reads these records (it cannot re-run hours of studies); they
+measure the machine, so they are kept out of the result tables, which stay deterministic.
+
+Example
+-------
+>>> import tempfile
+>>> out = Path(tempfile.mkdtemp())
+>>> record_part(out, "range-limit", 12.5, frames=96)["elapsed_s"]
+12.5
+>>> total_seconds(read_parts(out))
+12.5
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from scenes.render_cache import atomic_write_bytes
+
+__all__ = ["RUNS_FILE", "read_parts", "record_part", "stored_frames", "total_seconds"]
+
+RUNS_FILE = "runs.json"
+"""File name of the parts record in a command's output folder."""
+
+
+def stored_frames(out: Path) -> int:
+    """Frame tasks stored under ``out`` (every ``tasks/`` store in it, a study's resumable
+    store or those of the studies of a main job), 0 when there is none."""
+    return sum(1 for _ in Path(out).rglob("tasks/*/*.json"))
+
+
+def read_parts(out: Path) -> list[dict]:
+    """The parts recorded in ``out/runs.json`` (oldest first); empty when there is none."""
+    path = Path(out) / RUNS_FILE
+    if not path.is_file():
+        return []
+    parts = json.loads(path.read_text()).get("parts", [])
+    if not isinstance(parts, list):
+        raise ValueError(f"parts: expected a list in {path}, got {type(parts).__name__}")
+    return parts
+
+
+def record_part(out: Path, command: str, elapsed_s: float, frames: int | None = None) -> dict:
+    """Append one finished part of ``command`` (wall time ``elapsed_s``, s) to ``out/runs.json``;
+    returns it. ``frames``: frame tasks stored at its end (default: counted in ``out/tasks``)."""
+    part = {
+        "command": command,
+        "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "elapsed_s": round(float(elapsed_s), 1),
+        "frames": stored_frames(out) if frames is None else int(frames),
+    }
+    parts = [*read_parts(out), part]
+    atomic_write_bytes(Path(out) / RUNS_FILE, json.dumps({"parts": parts}, indent=2).encode())
+    return part
+
+
+def total_seconds(parts: list[dict]) -> float:
+    """Wall time of a run made of ``parts``, s (their sum)."""
+    return float(sum(p["elapsed_s"] for p in parts))
