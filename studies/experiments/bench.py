@@ -270,8 +270,8 @@ STUDY_MIX = ("range_limit", "brightness_diffuser", "webcam_vs_dslr")
 
 
 def study_mix(per_study: int = 8, seed: int = 0) -> list[dict]:
-    """``per_study`` frame tasks drawn at random from each quick study of :data:`STUDY_MIX`,
-    as the study makes them (whole frames, its estimators)."""
+    """``per_study`` frame tasks (or all of them, where a study has fewer) drawn at random from
+    each quick study of :data:`STUDY_MIX`, as the study makes them (whole frames, its estimators)."""
     from importlib import import_module
 
     from studies.engine.tasks import grid_conditions
@@ -281,7 +281,8 @@ def study_mix(per_study: int = 8, seed: int = 0) -> list[dict]:
     for name in STUDY_MIX:
         options = import_module(f"studies.catalog.{name}").default_options(quick=True)
         estimators = None if name == "webcam_vs_dslr" else ["best"]
-        tasks += rng.sample(frame_tasks(grid_conditions(options), options, estimators=estimators), per_study)
+        population = frame_tasks(grid_conditions(options), options, estimators=estimators)
+        tasks += rng.sample(population, min(per_study, len(population)))
     return tasks
 
 

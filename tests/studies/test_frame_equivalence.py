@@ -53,7 +53,7 @@ def test_detection_and_pose_success_agree_on_a_paired_grid():
     from studies.engine.scoring import pose_success
     from studies.experiments.bench import study_mix
 
-    tasks = study_mix(per_study=70, seed=3)
+    tasks = study_mix(per_study=100, seed=3)
     assert len(tasks) >= 200
     rows = {ref: [r for t in tasks for r in simulate_frame({**t, "reference_camera": ref})] for ref in (True, False)}
     for tracker in TRACKERS:
