@@ -23,4 +23,11 @@ MAIN_JOB = ("webcam-vs-dslr", "brightness-diffuser", "range-limit")
 SEQUENTIAL: dict[str, ModuleType] = {m.NAME: m for m in (webcam_vs_dslr, range_limit)}
 """Studies whose range limits a sequential design can decide
 (:mod:`studies.engine.sequential`): they have ``default_design(quick)`` and take
-``run(..., design=...)``; the main job runs them with their quick design."""
+``run(..., design=...)``."""
+
+MAIN_JOB_DESIGNS = ("range-limit",)
+"""The studies of :data:`MAIN_JOB` that place their frames by their quick sequential design:
+``range-limit`` decides every camera's far limit at 0° and 30° (the index's "how far");
+``webcam-vs-dslr`` runs its fixed quick grid there (colour separation and the webcam-DSLR
+comparison at 0°; a sequential design of its eight camera × drive units doubled the main
+job's frames for limits the index takes from ``range-limit``)."""

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from studies.catalog import MAIN_JOB, SEQUENTIAL, STUDIES
+from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, SEQUENTIAL, STUDIES
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
@@ -177,12 +177,12 @@ def main_job(
     budget_frames: opt.BudgetFrames = None,
     workers: opt.Workers = None,
 ) -> None:
-    """Run the quick versions of the three studies on the built-in defaults; range-limit and
-    webcam-vs-dslr place their frames by a sequential design (each its own --budget-frames)."""
+    """Run the quick versions of the three studies on the built-in defaults; range-limit places
+    its frames by its sequential design (--target-width-m, --target-relative, --budget-frames)."""
     settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
     designs = {
-        n: _checked(m.default_design(True).with_overrides(**settings), m.default_options(True))
-        for n, m in SEQUENTIAL.items()
+        n: _checked(SEQUENTIAL[n].default_design(True).with_overrides(**settings), SEQUENTIAL[n].default_options(True))
+        for n in MAIN_JOB_DESIGNS
     }
     execution = _execution(workers, None)
     prepare_out_dir(out)
