@@ -20,7 +20,10 @@ within ``±target_relative`` of the limit (L(1 − rel) ≤ low and high ≤ L(1
 target given being enough. A far limit that is the farthest range tried ("≥ farthest") is
 decided once the design may not extend the ranges further (``max_range_m``) and its lower
 bound meets the target with the farthest range as the limit. A far limit of "none"
-(no range reaches 0.95) is decided when its interval ends below the nearest range; a near
+(no range reaches 0.95) is decided when its interval ends below the nearest range, or when
+the best range's frames put P below 0.95 with 97.5 % posterior probability (the upper end of
+its Jeffreys 95 % interval, :func:`studies.engine.metrics.jeffreys_interval`, below 0.95:
+the best range is the one where P peaks, nearer and farther ranges do worse); a near
 limit is decided when no frame nearer than the peak failed ("≤ nearest"; the design does
 not go nearer than the grid's nearest range).
 
@@ -61,6 +64,7 @@ import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
 from studies.engine.max_range import estimate_max_range
+from studies.engine.metrics import jeffreys_interval
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tasks import StudyOptions, frame_task, grid_conditions
 
@@ -91,6 +95,8 @@ cannot reach, e.g. a flat P ≈ 0.95, still ends)."""
 MAX_ROUNDS = 200
 """Rounds after which a design stops whatever its budget (a guard; never reached in tests)."""
 _EPS = 1e-9
+P_WORKING = 0.95
+"""The probability of a correct pose a working range needs (:mod:`studies.engine.max_range`)."""
 
 FrameRunner = Callable[..., list[dict]]
 """Runs frame tasks: ``(tasks, out, execution, description=...) -> rows`` in task order
@@ -211,8 +217,15 @@ def far_status(rec: Mapping, design: SequentialDesign, max_range_m: float | None
     span = max(farthest - nearest, _EPS)
     low, high = float(rec["low_m"]), float(rec["high_m"])
     if rec["max_range_m"] <= 0:
-        decided = math.isfinite(high) and high < nearest
-        how = "no range reaches 0.95" if decided else "P at the best range may still reach 0.95"
+        k, n = int(rec.get("peak_successes", 0)), int(rec.get("peak_frames", 0))
+        peak_high = float(jeffreys_interval(k, n)[2]) if n else 1.0
+        below = math.isfinite(high) and high < nearest
+        decided = below or peak_high < P_WORKING
+        how = (
+            "no range reaches 0.95" + ("" if below else f" (P ≤ {peak_high:.2f} at the best range, {k} of {n} frames)")
+            if decided
+            else "P at the best range may still reach 0.95"
+        )
         return LimitStatus(decided, float(rec["fitted_from_m"]), nearest, min(high, farthest), math.inf, how)
     if rec.get("at_least") or not math.isfinite(high):
         if can_extend:

@@ -269,3 +269,26 @@ def test_frames_are_stored_tasks_and_a_cut_run_resumes_to_the_same_answer(tmp_pa
     assert json.loads((tmp_path / "cut" / "design.json").read_text()) == json.loads(
         (tmp_path / "whole" / "design.json").read_text()
     )
+
+
+@pytest.mark.parametrize(("successes", "decided"), [(132, True), (150, False)])
+def test_no_working_range_is_decided_when_the_best_range_is_surely_below_095(successes, decided):
+    """The C270 at 30° of a main job: P peaks at 4 m, where 132 of 157 frames succeeded
+    (Jeffreys 97.5 % upper bound 0.89 < 0.95: no range reaches 0.95, decided); with 150 of
+    157 (upper bound 0.98) it may still reach 0.95 and more frames are needed."""
+    rec = {
+        "frames": 426,
+        "max_range_m": 0.0,
+        "low_m": 0.0,
+        "high_m": 3.99,  # the fit's interval reaches past the nearest range (2 m): not decided by it
+        "fitted_from_m": 4.0,
+        "nearest_tested_m": 2.0,
+        "farthest_tested_m": 12.0,
+        "peak_frames": 157,
+        "peak_successes": successes,
+        "at_least": False,
+    }
+    status = far_status(rec, SequentialDesign(target_relative=0.2))
+    assert status.decided is decided
+    if decided:
+        assert status.how == "no range reaches 0.95 (P ≤ 0.89 at the best range, 132 of 157 frames)"
