@@ -15,7 +15,7 @@ from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, prepare_out_dir
-from studies.engine.run_log import record_part
+from studies.engine.run_log import timed_part
 from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
 from studies.engine.tasks import grid_conditions
@@ -121,11 +121,11 @@ def study(
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    if design is None:
-        module.run(out, options, execution)
-    else:
-        module.run(out, options, execution, design=design)
-    record_part(out, name, time.perf_counter() - t0)
+    with timed_part(out, name):
+        if design is None:
+            module.run(out, options, execution)
+        else:
+            module.run(out, options, execution, design=design)
     console.print(f"{name}: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
 
 
@@ -163,8 +163,8 @@ def validate(
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    validation.run(out, quick, execution, seeds=seeds, calibration=None if nominal else calibration, points=points)
-    record_part(out, "validate", time.perf_counter() - t0)
+    with timed_part(out, "validate"):
+        validation.run(out, quick, execution, seeds=seeds, calibration=None if nominal else calibration, points=points)
     console.print(f"validate: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
 
 
@@ -187,17 +187,16 @@ def main_job(
     execution = _execution(workers, None)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    for name in MAIN_JOB:
-        module = STUDIES[name]
-        options = module.default_options(True)
-        options.validate()
-        if name in designs:
-            module.run(prepare_out_dir(out / name), options, execution, design=designs[name])
-        else:
-            module.run(prepare_out_dir(out / name), options, execution)
-    elapsed = time.perf_counter() - t0
-    write_index(out, elapsed_s=elapsed)
-    record_part(out, "main-job", elapsed)
+    with timed_part(out, "main-job"):
+        for name in MAIN_JOB:
+            module = STUDIES[name]
+            options = module.default_options(True)
+            options.validate()
+            if name in designs:
+                module.run(prepare_out_dir(out / name), options, execution, design=designs[name])
+            else:
+                module.run(prepare_out_dir(out / name), options, execution)
+        write_index(out, elapsed_s=time.perf_counter() - t0)
     console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 
 

@@ -12,19 +12,25 @@ Example
 >>> out = Path(tempfile.mkdtemp())
 >>> record_part(out, "range-limit", 12.5, frames=96)["elapsed_s"]
 12.5
->>> total_seconds(read_parts(out))
-12.5
+>>> with timed_part(out, "range-limit"):
+...     pass
+>>> [p["complete"] for p in read_parts(out)]
+[True, True]
+>>> total_seconds(read_parts(out)) >= 12.5
+True
 """
 
 from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from scenes.render_cache import atomic_write_bytes
 
-__all__ = ["RUNS_FILE", "read_parts", "record_part", "stored_frames", "total_seconds"]
+__all__ = ["RUNS_FILE", "read_parts", "record_part", "stored_frames", "timed_part", "total_seconds"]
 
 RUNS_FILE = "runs.json"
 """File name of the parts record in a command's output folder."""
@@ -47,18 +53,34 @@ def read_parts(out: Path) -> list[dict]:
     return parts
 
 
-def record_part(out: Path, command: str, elapsed_s: float, frames: int | None = None) -> dict:
-    """Append one finished part of ``command`` (wall time ``elapsed_s``, s) to ``out/runs.json``;
-    returns it. ``frames``: frame tasks stored at its end (default: counted in ``out/tasks``)."""
+def record_part(out: Path, command: str, elapsed_s: float, frames: int | None = None, *, complete: bool = True) -> dict:
+    """Append one part of ``command`` (wall time ``elapsed_s``, s) to ``out/runs.json``; returns
+    it. ``frames``: frame tasks stored at its end (default: counted under ``out``);
+    ``complete``: whether the command finished (False: interrupted, to be resumed)."""
     part = {
         "command": command,
         "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "elapsed_s": round(float(elapsed_s), 1),
         "frames": stored_frames(out) if frames is None else int(frames),
+        "complete": bool(complete),
     }
     parts = [*read_parts(out), part]
+    Path(out).mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(Path(out) / RUNS_FILE, json.dumps({"parts": parts}, indent=2).encode())
     return part
+
+
+@contextmanager
+def timed_part(out: Path, command: str) -> Iterator[None]:
+    """Record the enclosed work as one part of ``command`` in ``out/runs.json``, complete or
+    (on an exception, Ctrl-C included) interrupted; the exception propagates."""
+    t0 = time.perf_counter()
+    complete = False
+    try:
+        yield
+        complete = True
+    finally:
+        record_part(out, command, time.perf_counter() - t0, complete=complete)
 
 
 def total_seconds(parts: list[dict]) -> float:

@@ -797,17 +797,19 @@ def recorded_runs(folder: Path = RECORDED_RUNS) -> dict:
         if not path.is_file():
             return None
         parts = json.loads(path.read_text())["parts"]
+        last = parts[-1]
         return {
             "s": total_seconds(parts),
             "parts": len(parts),
-            "frames": parts[-1]["frames"],
-            "finished_utc": parts[-1]["finished_utc"],
+            "frames": last["frames"],
+            "finished_utc": last["finished_utc"],
+            "complete": last.get("complete", True),
         }
 
     studies = {name: entry(folder / "full" / f"{name}.runs.json") for name in FULL_STUDIES}
-    done = [v for v in studies.values() if v is not None]
+    all_done = all(v is not None and v["complete"] for v in studies.values())
     return {
         "main_job": entry(folder / "main-job" / "runs.json"),
         "full_studies": studies,
-        "full_studies_s": sum(v["s"] for v in done) if len(done) == len(studies) else None,
+        "full_studies_s": sum(v["s"] for v in studies.values()) if all_done else None,
     }

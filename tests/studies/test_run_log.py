@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from studies.engine.run_log import read_parts, record_part, stored_frames, total_seconds
+from studies.engine.run_log import read_parts, record_part, stored_frames, timed_part, total_seconds
 
 
 def test_parts_of_a_resumed_run_add_up_and_count_the_stored_frames(tmp_path):
@@ -27,3 +27,35 @@ def test_a_runs_file_without_a_list_of_parts_is_refused(tmp_path):
     (tmp_path / "runs.json").write_text(json.dumps({"parts": {"elapsed_s": 1}}))
     with pytest.raises(ValueError, match=r"^parts: expected a list in .*runs.json, got dict$"):
         read_parts(tmp_path)
+
+
+def test_an_interrupted_part_is_recorded_as_such_and_the_error_propagates(tmp_path):
+    with pytest.raises(KeyboardInterrupt), timed_part(tmp_path, "validate"):
+        raise KeyboardInterrupt
+    with timed_part(tmp_path, "validate"):
+        pass
+    assert [p["complete"] for p in read_parts(tmp_path)] == [False, True]
+
+
+def test_the_benchmark_sums_the_recorded_full_studies_only_when_all_finished(tmp_path):
+    from studies.experiments.bench import FULL_STUDIES, recorded_runs
+
+    (tmp_path / "full").mkdir()
+    for k, name in enumerate(FULL_STUDIES):
+        scratch = tmp_path / name
+        record_part(scratch, name, 100.0 * (k + 1), frames=10, complete=k != 0)
+        (tmp_path / "full" / f"{name}.runs.json").write_text((scratch / "runs.json").read_text())
+    runs = recorded_runs(tmp_path)
+    assert runs["main_job"] is None and runs["full_studies_s"] is None  # the first is interrupted
+    first = tmp_path / FULL_STUDIES[0]
+    record_part(first, FULL_STUDIES[0], 50.0, frames=12)  # resumed to completion
+    (tmp_path / "full" / f"{FULL_STUDIES[0]}.runs.json").write_text((first / "runs.json").read_text())
+    runs = recorded_runs(tmp_path)
+    assert runs["full_studies"][FULL_STUDIES[0]] | {"finished_utc": None} == {
+        "s": 150.0,
+        "parts": 2,
+        "frames": 12,
+        "finished_utc": None,
+        "complete": True,
+    }
+    assert runs["full_studies_s"] == 150.0 + 200.0 + 300.0 + 400.0
