@@ -24,6 +24,7 @@ import tempfile
 import time
 from contextlib import contextmanager
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -333,9 +334,12 @@ def cold_renders(geometries: int = 6) -> dict:
     studies' near-field sampling, paid once per configuration and colour; ``near_fields``
     also has foam + 1 matched sheet (one angle). ``cold_render_s``: the median time to
     render a geometry (a new range and yaw: new camera pose, new crop) once the process has
-    rendered one, as a study worker does for every pose after its first; beside it the same
-    geometries through ``mitsuba.render`` (``reuse_kernels=False``, the previous path),
-    each geometry rendered by both paths in turn.
+    rendered one, as a study worker does for every pose after its first, by the studies'
+    render (the lit faces by primary rays, :mod:`scenes.direct_view`); beside it the same
+    geometries wholly path-traced (``cold_render_path_s``: ``direct = "path"``, the renders
+    before issue 24, and through ``mitsuba.render``), each geometry rendered by the three
+    in turn. A dark room has no background to render; ``room_background_s`` is the lit
+    room's, paid once per camera and band of range, yaw and height.
     """
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "HOME": tmp, "BEACON_SIM_CACHE": str(Path(tmp) / "cache")}
@@ -365,21 +369,30 @@ def _cold_renders(geometries: int) -> dict:
     t0 = time.perf_counter()
     render_background(lit)
     room_background_s = time.perf_counter() - t0
-    times: dict[str, list[float]] = {"reuse": [], "mitsuba_render": []}
+    times: dict[str, list[float]] = {"primary": [], "path": [], "mitsuba_render": []}
     for k in range(geometries):
         geometry = {"range_m": 3.0 + 0.9 * k, "yaw_deg": -25.0 + 10.0 * k}
         scenario = Scenario(**{**BENCH_SCENARIO, **geometry}, render=RenderSettings(**RENDER))
-        for label, reuse in (("reuse", True), ("mitsuba_render", False)):
+        path = replace(scenario, render=replace(scenario.render, direct="path"))
+        runs = {
+            "primary": partial(render, scenario),  # what a study renders (uncached: cache=None)
+            "path": partial(render, path),  # everything path-traced (the reference)
+            "mitsuba_render": partial(
+                render_unit_groups, scene_spec(path), path.render.spp, path.render.seed, reuse_kernels=False
+            ),
+        }
+        for label, run in runs.items():
             t0 = time.perf_counter()
-            render_unit_groups(scene_spec(scenario), scenario.render.spp, scenario.render.seed, reuse_kernels=reuse)
+            run()
             times[label].append(time.perf_counter() - t0)
     return {
         "near_field_s": near_fields["foam"],
         "near_fields": near_fields,
-        "cold_render_s": float(np.median(times["reuse"])),
+        "cold_render_s": float(np.median(times["primary"])),
+        "cold_render_path_s": float(np.median(times["path"])),
         "cold_render_mitsuba_render_s": float(np.median(times["mitsuba_render"])),
         "room_background_s": room_background_s,
-        "ratio": float(np.median(times["mitsuba_render"]) / np.median(times["reuse"])),
+        "ratio": float(np.median(times["path"]) / np.median(times["primary"])),
         "each_s": times,
         "render": dict(RENDER),
     }
