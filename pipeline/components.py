@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["MAX_POINT_PIXELS", "components"]
+__all__ = ["MAX_POINT_PIXELS", "components", "group_bounds"]
 
 
 MAX_POINT_PIXELS = 200_000
@@ -60,10 +60,25 @@ def components(mask: NDArray[np.uint8]):
     xs, ys, label = xs[order], ys[order], label[order]
     n = int(label.max()) + 1
     area = np.bincount(label, minlength=n)
-    x0, y0 = np.full(n, np.iinfo(np.int64).max), np.full(n, np.iinfo(np.int64).max)
-    x1, y1 = np.full(n, -1), np.full(n, -1)
-    np.minimum.at(x0, label, xs)
-    np.minimum.at(y0, label, ys)
-    np.maximum.at(x1, label, xs)
-    np.maximum.at(y1, label, ys)
+    x0, y0, x1, y1 = group_bounds(label, n, xs, ys, xs, ys)
     return xs, ys, label, np.stack([x0, y0, x1 - x0 + 1, y1 - y0 + 1, area], axis=1)
+
+
+def group_bounds(
+    group: NDArray[np.integer],
+    n: int,
+    x0: NDArray[np.integer],
+    y0: NDArray[np.integer],
+    x1: NDArray[np.integer],
+    y1: NDArray[np.integer],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Inclusive bounding box (x0, y0, x1, y1) of each of ``n`` groups of boxes, px: box k
+    (inclusive corners ``x0[k], y0[k]`` to ``x1[k], y1[k]``; a pixel is a box with equal
+    corners) belongs to group ``group[k]``. An empty group keeps (int64 max, int64 max, -1, -1)."""
+    bx0, by0 = np.full(n, np.iinfo(np.int64).max), np.full(n, np.iinfo(np.int64).max)
+    bx1, by1 = np.full(n, -1), np.full(n, -1)
+    np.minimum.at(bx0, group, x0)
+    np.minimum.at(by0, group, y0)
+    np.maximum.at(bx1, group, x1)
+    np.maximum.at(by1, group, y1)
+    return bx0, by0, bx1, by1

@@ -40,7 +40,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from pipeline.angles import Intrinsics, full_pixel, resized_pixel, study_angles
-from pipeline.components import components
+from pipeline.components import components, group_bounds
 from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, to_uint8
 from pipeline.markers import Blob, TrackResult, number_study
@@ -209,13 +209,7 @@ def mask_windows(
     gap_x = np.maximum(x0[:, None] - x1[None, :], x0[None, :] - x1[:, None])
     gap_y = np.maximum(y0[:, None] - y1[None, :], y0[None, :] - y1[:, None])
     _, group = connected_components(csr_matrix((gap_x <= gx) & (gap_y <= gy)), directed=False)
-    ng = int(group.max()) + 1
-    bx0, by0 = np.full(ng, np.iinfo(np.int64).max), np.full(ng, np.iinfo(np.int64).max)
-    bx1, by1 = np.full(ng, -1), np.full(ng, -1)
-    np.minimum.at(bx0, group, x0)
-    np.minimum.at(by0, group, y0)
-    np.maximum.at(bx1, group, x1)
-    np.maximum.at(by1, group, y1)
+    bx0, by0, bx1, by1 = group_bounds(group, int(group.max()) + 1, x0, y0, x1, y1)
     h, w = mask.shape
     rx, ry = _close_reach(s)
     need_w, need_h = _survivor_size(s)
