@@ -86,12 +86,13 @@ def uses_primary_rays(scenario: Scenario, variant: str) -> bool:
     return scenario.render.direct == "primary" and not variant.startswith("scalar")
 
 
-def render_key(scenario: Scenario, variant: str, groups: list[str]) -> str:
+def render_key(scenario: Scenario, variant: str, groups: list[str], spec: dict | None = None) -> str:
     """Cache key of the unit-scale render of ``groups`` of ``scenario``.
 
+    ``spec``: ``scene_spec(scenario)`` when the caller has it (assembled once per geometry).
     ``direct = "path"`` keeps the key of the renders before :mod:`scenes.direct_view`."""
     r = scenario.render
-    parts: list = [RENDER_VERSION, variant, scene_spec(scenario), r.spp, r.seed, groups]
+    parts: list = [RENDER_VERSION, variant, spec if spec is not None else scene_spec(scenario), r.spp, r.seed, groups]
     if uses_primary_rays(scenario, variant):
         parts += [{"direct": r.direct, "version": DIRECT_VERSION, "scatter_spp": r.scatter_spp}]
     return content_key(*parts)
@@ -126,7 +127,7 @@ def render(
     unknown = set(groups) - set(available)
     if unknown:
         raise ValueError(f"groups: expected some of {available}, got unknown {sorted(unknown)}")
-    key = render_key(scenario, variant, groups)
+    key = render_key(scenario, variant, groups, spec)
 
     settings = scenario.render
 
