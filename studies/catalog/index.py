@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import html
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -310,7 +311,7 @@ def write_index(out: Path, elapsed_s: float | None = None) -> dict:
         result["elapsed_s"] = round(float(elapsed_s), 1)
         rep.text(f"Finished in {elapsed_s:.0f} s.", note=True)
     rep.write(out / "index.html")
-    atomic_write_bytes(out / "answers.json", json.dumps(result, indent=2, allow_nan=True).encode())
+    atomic_write_bytes(out / "answers.json", json.dumps(strict_json(result), indent=2, allow_nan=False).encode())
     return result
 
 
@@ -326,3 +327,15 @@ def _answer_table(records: list[dict], labels: Mapping[str, str]) -> str:
         rows.append(f"<tr>{''.join(cells)}</tr>")
     caption = "<p><b>Per camera (best tracker)</b></p>"
     return f"{caption}<table class='answers'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
+
+
+def strict_json(value):
+    """``value`` with every non-finite float (NaN, ±inf: "not measured", "open above") as None,
+    so ``json.dumps(..., allow_nan=False)`` writes standard JSON (RFC 8259 has no NaN)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v) for v in value]
+    return value

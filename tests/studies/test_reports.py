@@ -325,3 +325,13 @@ def test_heat_map_numbers_are_legible(main_job):
     assert numbers and min(t.get_fontsize() for t in numbers) >= 10
     assert {t.get_text() for t in fig.axes[0].texts} == {"2/2", "0/2"}  # the frames behind each fraction
     plt.close(fig)
+
+
+def test_answers_json_is_standard_json(main_job):
+    """No bare NaN or Infinity (not JSON, RFC 8259): a limit not measured or open above is null."""
+
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    answers = json.loads((main_job / "answers.json").read_text(), parse_constant=refuse)
+    assert answers["cameras"]
