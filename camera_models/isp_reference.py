@@ -14,9 +14,8 @@ from camera_models.isp import (
     blend_highlights,
     camera_to_srgb_matrix,
     demosaic,
+    encode_8bit,
     encode_jpeg,
-    srgb_encode_8bit,
-    tone_curve,
     white_balance_gains,
 )
 
@@ -40,11 +39,7 @@ def reference_rgb8(raw: np.ndarray, camera, x0: int = 0, y0: int = 0, gains: np.
             np.clip(rgb, 0.0, 1.0, out=rgb)
         elif isp.highlight == "blend":
             blend_highlights(rgb, 1.0)
-        lin = rgb @ matrix_t
-        if isp.tone_curve == "srgb":
-            out[r0 : r0 + 256] = srgb_encode_8bit(lin)
-        else:
-            out[r0 : r0 + 256] = np.rint(tone_curve(lin, isp.tone_curve, isp.tone_contrast) * 255.0).astype(np.uint8)
+        out[r0 : r0 + 256] = encode_8bit(rgb @ matrix_t, isp.tone_curve, isp.tone_contrast)
     return out
 
 
