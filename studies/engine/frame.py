@@ -5,7 +5,8 @@ worker process or a Dask cluster):
 
 ``scenario``   keyword arguments of :class:`scenes.scenario.Scenario` (without ``render``)
 ``render``     keyword arguments of :class:`scenes.scenario.RenderSettings`
-``seed``       sensor-noise seed
+``seed``       sensor-noise seed index: the sensor's noise is drawn from :func:`noise_seed`, which
+               mixes it with everything that makes the frame, so no two frames share a noise field
 ``exposure``   optional manual settings ``{"iso": .., "exposure_s": .., "f_number": ..}`` (else the camera's)
 ``trackers``, ``estimators``  which detectors to run (default both of each)
 ``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
@@ -37,6 +38,7 @@ marker measurements that do not depend on the detector (core saturation, colour)
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import resource
@@ -76,8 +78,8 @@ streams, the same distributions).
 (:mod:`scenes.direct_view`, ``RenderSettings.direct``/``background``); the best tracker's
 noise-aware threshold (issue 24).
 7: the 16-bit ISP re-encodes values next to a code step from their exact linear value (its
-rounding had moved dark codes up more often than down: +1.6 % false blobs on a C270 dark frame,
-half the Spedal's false-colour detections on the paired grid)."""
+rounding had moved dark codes up more often than down: +1.6 % false blobs on a C270 dark frame),
+and the sensor's noise from a seed per frame (:func:`noise_seed`), not per seed index (issue 24)."""
 
 
 def frame_scenario(task: dict):
@@ -110,6 +112,29 @@ class CapturedFrame:
         return self.capture.x0, self.capture.y0
 
 
+NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides")
+"""The task fields that make a frame's mean image, mixed into its noise seed (:func:`noise_seed`)."""
+
+
+def noise_seed(task: dict) -> int:
+    """The sensor-noise seed of a frame task (a 63-bit integer): its ``seed`` hashed (SHA-256)
+    with the fields that make the frame (:data:`NOISE_SEED_FIELDS`).
+
+    Frames that differ in anything (range, yaw, drive, camera, ...) draw independent noise, so
+    outcomes across a study's conditions are independent trials. With the bare ``seed`` (frame
+    version 6 and before) every frame of one seed and camera shared its read-noise field, and
+    with it most of its false blobs: a webcam's detections at different ranges were correlated.
+    The same task gives the same seed; the reference and fast camera paths share it.
+
+    >>> t = {"scenario": {"range_m": 4.0}, "seed": 0}
+    >>> noise_seed(t) == noise_seed(dict(t)), noise_seed(t) == noise_seed({**t, "seed": 1})
+    (True, False)
+    """
+    what = [int(task["seed"]), {k: task.get(k) for k in NOISE_SEED_FIELDS}]
+    digest = hashlib.sha256(json.dumps(what, sort_keys=True, default=repr).encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 1
+
+
 def capture_frame(task: dict) -> CapturedFrame:
     """Render (or reuse the render of) a frame task and capture it with its camera."""
     scenario, camera, radiance, background = frame_inputs(task)
@@ -120,7 +145,7 @@ def capture_frame(task: dict) -> CapturedFrame:
     cap = capture(
         radiance,
         camera,
-        int(task["seed"]),
+        noise_seed(task),
         background,
         exposure,
         f_number=settings.get("f_number"),
