@@ -10,7 +10,10 @@ changes) and for ``beacon-sim bench`` (which reports them):
 * photon transfer (EMVA 1288's pair method: mean and temporal variance of a uniform
   exposure) of both paths at a few signal levels;
 * a two-sample χ² test of dark-frame histograms;
-* the blobs each tracker finds on dark whole frames of both paths (Mann-Whitney U).
+* the blobs each tracker finds on dark whole frames of both paths (Mann-Whitney U);
+* the two ISPs on one dark whole frame's raw: the share of 8-bit codes they set apart, and
+  how many of those the fast ISP sets higher (a one-sided rounding bias shows here long
+  before 20 frames' false blobs could show it).
 
 Example
 -------
@@ -45,6 +48,7 @@ __all__ = [
     "dark_frame_blobs",
     "dark_histogram_p",
     "false_blob_comparison",
+    "isp_code_differences",
     "photon_transfer",
     "same_distribution_p",
     "summary",
@@ -105,6 +109,24 @@ def dark_frame_blobs(name: str, seed: int, reference: bool) -> dict[str, int]:
     return {t: len(TRACKERS[t](bgr, intr, (0, 0), {"beacon": "v2"}).blobs) for t in TRACKERS}
 
 
+def isp_code_differences(name: str, seed: int = 0) -> dict[str, float]:
+    """Both ISPs on the same raw dark whole frame of camera ``name`` (the camera's exposure
+    for the dark, fast sensor path): the share of 8-bit codes that differ and the share of
+    those the fast ISP sets higher (0.5 for an unbiased rounding; NaN when none differ)."""
+    cam = load_camera(name)
+    ex = auto_exposure(cam, lambda t, g: 0.0) if cam.exposure.mode == "auto" else manual_exposure(cam)
+    g = cam.geometry
+    raw = expose(
+        np.zeros((g.height_px, g.width_px), np.float32), cam.sensor, SensorSettings(ex.exposure_s, ex.analog_gain), seed
+    )
+    d = process(raw, cam, analog_gain=ex.analog_gain).bgr8.astype(np.int16) - reference_process(raw, cam).bgr8
+    differ = int(np.count_nonzero(d))
+    return {
+        "share_differing": differ / d.size,
+        "share_higher": float(np.count_nonzero(d > 0) / differ) if differ else math.nan,
+    }
+
+
 def same_distribution_p(a: NDArray, b: NDArray) -> float:
     """p-value that two samples of counts share one distribution (two-sided Mann-Whitney U;
     1 when both are constant and equal)."""
@@ -128,7 +150,8 @@ def summary(frames: int = 20) -> dict:
     """The headline statistics ``beacon-sim bench`` reports: per camera at its highest gain,
     the largest relative difference between the paths' photon-transfer means and variances
     over four levels (0, 0.2 %, 5 % and 50 % of the clip), the dark-frame χ² p (one pixel per
-    row of 200 000 rows), and the C270's false blobs per dark whole frame (``frames`` per path)."""
+    row of 200 000 rows), the ISPs' codes on one dark whole frame (:func:`isp_code_differences`),
+    and the C270's false blobs per dark whole frame (``frames`` per path)."""
     gains = {"canon-t6-18mm": {"iso": 6400}, "logitech-c270": {"gain_code": 255}, "spedal-920": {"gain_code": 255}}
     cameras = {}
     for name, setting in gains.items():
@@ -150,5 +173,6 @@ def summary(frames: int = 20) -> dict:
             "ptc_max_rel_var_diff": worst_var,
             "ptc_rel_var_se": math.sqrt(2.0 / (PTC_SHAPE[0] * PTC_SHAPE[1])),
             "dark_chi2_p": dark_histogram_p(a, b),
+            "isp_dark_frame": isp_code_differences(name),
         }
     return {"cameras": cameras, "false_blobs_c270": false_blob_comparison("logitech-c270", frames), "frames": frames}

@@ -59,3 +59,22 @@ def test_defocus_and_glare_switches_reach_the_capture(mitsuba_variant):
     plain = bright_pixels({})
     assert bright_pixels({"effects.focus_distance_m": 1.0}) > 2 * plain
     assert bright_pixels({"effects.glare": True}) > 2 * plain
+
+
+def test_noise_seed_is_one_per_frame_and_shared_by_what_only_scores_it():
+    """Frames that differ in what the camera sees draw independent noise; the detectors run,
+    the tags and the camera path (reference or fast) do not change a frame's noise seed."""
+    from studies.engine.frame import noise_seed
+
+    base = {"scenario": {"range_m": 4.0, "yaw_deg": 0.0, "camera": "logitech-c270"}, "seed": 0, "full_frame": True}
+    seeds = {
+        noise_seed(base),
+        noise_seed({**base, "seed": 1}),
+        noise_seed({**base, "scenario": {**base["scenario"], "range_m": 5.0}}),
+        noise_seed({**base, "exposure": {"iso": 800}}),
+        noise_seed({**base, "camera_overrides": {"lens.f_number": 5.6}}),
+        noise_seed({**base, "full_frame": False}),
+    }
+    assert len(seeds) == 6 and all(0 <= s < 2**63 for s in seeds)
+    same = {"trackers": ["thesis"], "estimators": ["best"], "tags": {"test": "x"}, "reference_camera": True}
+    assert noise_seed({**base, **same}) == noise_seed(base)
