@@ -84,11 +84,13 @@ def _version() -> str:
 
 @functools.cache
 def _commit() -> str | None:
-    """The short hash of the checkout this package runs from; None without git or a checkout."""
+    """The short hash of the checkout this package runs from; None without git, outside a
+    checkout, or in a checkout of another project (an installed copy inside someone's repo)."""
+    here = Path(__file__).resolve().parent
     try:
         done = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
+            ["git", "rev-parse", "--show-toplevel", "--short=12", "HEAD"],
+            cwd=here,
             capture_output=True,
             text=True,
             timeout=10,
@@ -96,8 +98,15 @@ def _commit() -> str | None:
         )
     except (OSError, subprocess.SubprocessError):
         return None
-    commit = done.stdout.strip()
-    return commit if done.returncode == 0 and commit else None
+    lines = done.stdout.split()
+    if done.returncode != 0 or len(lines) != 2:
+        return None
+    top, commit = Path(lines[0]), lines[1]
+    try:
+        ours = f'name = "{PACKAGE}"' in (top / "pyproject.toml").read_text()
+    except OSError:
+        ours = False
+    return commit if ours else None
 
 
 def provenance(today: dt.date | None = None) -> Provenance:
