@@ -15,6 +15,7 @@ from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, prepare_out_dir
+from studies.engine.report import page_context
 from studies.engine.run_log import timed_part
 from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
@@ -121,7 +122,7 @@ def study(
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    with timed_part(out, name):
+    with timed_part(out, name), page_context(quick=quick or None):
         if design is None:
             module.run(out, options, execution)
         else:
@@ -163,7 +164,7 @@ def validate(
     execution = _execution(workers, scheduler)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    with timed_part(out, "validate"):
+    with timed_part(out, "validate"), page_context(quick=quick or None):
         validation.run(out, quick, execution, seeds=seeds, calibration=None if nominal else calibration, points=points)
     console.print(f"validate: report at {out / 'report.html'} ({time.perf_counter() - t0:.0f} s)")
 
@@ -187,7 +188,7 @@ def main_job(
     execution = _execution(workers, None)
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    with timed_part(out, "main-job"):
+    with timed_part(out, "main-job"), page_context(quick=True, index_href="../index.html"):
         for name in MAIN_JOB:
             module = STUDIES[name]
             options = module.default_options(True)
@@ -196,7 +197,7 @@ def main_job(
                 module.run(prepare_out_dir(out / name), options, execution, design=designs[name])
             else:
                 module.run(prepare_out_dir(out / name), options, execution)
-        write_index(out, elapsed_s=time.perf_counter() - t0)
+        write_index(out, elapsed_s=time.perf_counter() - t0, quick=True)
     console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 
 

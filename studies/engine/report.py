@@ -3,15 +3,26 @@
 Figures are saved at :data:`FIGURE_DPI` and shown at their natural size up to the page's
 width, so a figure drawn :data:`PAGE_WIDTH_IN` inches wide or less is not scaled down and
 its text keeps the size it was drawn at (10 pt ≈ 14 px).
+
+Every page says under its title what made it (:class:`Provenance`: the package version,
+the git commit when known, the date) and, inside :func:`page_context`, whether it is the
+quick form of its study and where the index that links it is (a link back).
 """
 
 from __future__ import annotations
 
 import base64
+import contextlib
+import datetime as dt
+import functools
 import html
 import io
-from collections.abc import Callable, Mapping
+import subprocess
+from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as package_version
 from pathlib import Path
 
 from scenes.render_cache import atomic_write_bytes
@@ -37,7 +48,109 @@ table.answers td, table.answers th { text-align: left; white-space: normal; }
 .lead p { margin: 0.3em 0; }
 figure { margin: 1em 0; } figcaption { font-size: 0.9em; color: #555; }
 img { max-width: 100%; } .note { color: #555; font-size: 0.9em; }
+.meta { color: #555; font-size: 0.85em; margin: 0 0 1em; }
 """
+
+PACKAGE = "beacon-sim"
+"""The distribution whose version the pages name."""
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """What made a page: ``version`` of the package, ``commit`` (short git hash; None when
+    unknown: no git, or not a checkout) and ``date`` (ISO, UTC)."""
+
+    version: str
+    commit: str | None
+    date: str
+
+    def text(self) -> str:
+        """ "beacon-sim 0.1.0, commit 8143c1d, 2026-12-02" (no commit when it is unknown)."""
+        commit = f", commit {self.commit}" if self.commit else ", commit unknown"
+        return f"{PACKAGE} {self.version}{commit}, {self.date}"
+
+    def to_dict(self) -> dict:
+        """The fields, for JSON."""
+        return {"version": self.version, "commit": self.commit, "date": self.date}
+
+
+@functools.cache
+def _version() -> str:
+    try:
+        return package_version(PACKAGE)
+    except PackageNotFoundError:
+        return "unknown version"
+
+
+@functools.cache
+def _commit() -> str | None:
+    """The short hash of the checkout this package runs from; None without git, outside a
+    checkout, or in a checkout of another project (an installed copy inside someone's repo)."""
+    here = Path(__file__).resolve().parent
+    try:
+        done = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel", "--short=12", "HEAD"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    lines = done.stdout.split()
+    if done.returncode != 0 or len(lines) != 2:
+        return None
+    top, commit = Path(lines[0]), lines[1]
+    try:
+        ours = f'name = "{PACKAGE}"' in (top / "pyproject.toml").read_text()
+    except OSError:
+        ours = False
+    return commit if ours else None
+
+
+def provenance(today: dt.date | None = None) -> Provenance:
+    """The running package's :class:`Provenance` (``today``: the date to state, default today, UTC)."""
+    day = today or dt.datetime.now(dt.UTC).date()
+    return Provenance(version=_version(), commit=_commit(), date=day.isoformat())
+
+
+@dataclass(frozen=True)
+class PageContext:
+    """What every page written inside :func:`page_context` states: ``quick`` (True: the quick
+    form of its study; None: not said), ``index_href`` (the index page, relative to the page;
+    None: no link back) and ``provenance`` (None: :func:`provenance` at writing)."""
+
+    quick: bool | None = None
+    index_href: str | None = None
+    provenance: Provenance | None = None
+
+
+_CONTEXT: ContextVar[PageContext | None] = ContextVar("page_context", default=None)
+
+
+@contextlib.contextmanager
+def page_context(
+    quick: bool | None = None, index_href: str | None = None, provenance: Provenance | None = None
+) -> Iterator[PageContext]:
+    """Pages written inside say ``quick`` form, link back to ``index_href`` and state ``provenance``."""
+    token = _CONTEXT.set(PageContext(quick=quick, index_href=index_href, provenance=provenance))
+    try:
+        yield _CONTEXT.get() or PageContext()
+    finally:
+        _CONTEXT.reset(token)
+
+
+def meta_line(context: PageContext | None = None) -> str:
+    """The line under a page's title (markup): "← index · quick form · beacon-sim 0.1.0, commit …, date"."""
+    ctx = context or _CONTEXT.get() or PageContext()
+    parts = []
+    if ctx.index_href:
+        parts.append(f"<a href='{html.escape(ctx.index_href)}'>← index of the main job</a>")
+    if ctx.quick:
+        parts.append("quick form (the main job's small grid)")
+    parts.append(html.escape((ctx.provenance or provenance()).text()))
+    return f"<p class='meta'>{' · '.join(parts)}</p>"
 
 
 @dataclass
@@ -119,10 +232,11 @@ class Report:
         )
 
     def write(self, path: Path) -> Path:
-        """Write the report atomically."""
+        """Write the report atomically, its :func:`meta_line` under the title."""
         doc = (
             f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(self.title)}</title>"
-            f"<style>{_STYLE}</style></head><body><h1>{html.escape(self.title)}</h1>{''.join(self.parts)}</body></html>"
+            f"<style>{_STYLE}</style></head><body><h1>{html.escape(self.title)}</h1>{meta_line()}"
+            f"{''.join(self.parts)}</body></html>"
         )
         atomic_write_bytes(Path(path), doc.encode())
         return Path(path)

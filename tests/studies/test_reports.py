@@ -24,8 +24,8 @@ import pytest
 
 from scenes.led import led_for_side
 from studies.catalog import brightness_diffuser, range_limit, webcam_vs_dslr
-from studies.catalog.index import write_index
-from studies.engine.report import PAGE_WIDTH_IN
+from studies.catalog.index import FIGURE_NAME, write_index
+from studies.engine.report import PAGE_WIDTH_IN, Provenance, page_context
 from studies.engine.tasks import StudyOptions
 
 matplotlib.use("Agg")
@@ -181,11 +181,15 @@ def main_job(tmp_path_factory) -> Path:
         webcam_vs_dslr: _webcam_frame(),
         brightness_diffuser: _brightness_frame(),
     }
-    for module, frame in frames.items():
-        (out / module.NAME).mkdir()
-        module.write_outputs(out / module.NAME, options[module], frame)
-    write_index(out, elapsed_s=12.0)
+    with page_context(quick=True, index_href="../index.html", provenance=MADE_BY):
+        for module, frame in frames.items():
+            (out / module.NAME).mkdir()
+            module.write_outputs(out / module.NAME, options[module], frame)
+    write_index(out, elapsed_s=12.0, quick=True, made_by=MADE_BY)
     return out
+
+
+MADE_BY = Provenance(version="9.8.7", commit="0123456789ab", date="2031-05-06")
 
 
 def _summary(out: Path, name: str) -> dict:
@@ -253,33 +257,53 @@ def test_brightness_diffuser_recommends_the_known_setting_with_its_power(main_jo
 
 def test_index_answers_first(main_job):
     page = (main_job / "index.html").read_text()
-    assert page.index('class="lead"') < page.index("<table") < page.index("Reports</h2>")
+    assert page.index('class="lead"') < page.index(FIGURE_NAME) < page.index("<table") < page.index("Reports</h2>")
     lead = _text(main_job / "index.html").split("Per camera")[0]
-    power = f"{1e3 * led_for_side('red').radiant_flux_W(2.0):.2g}"
+    # 18 of 18 correct cannot show P ≥ 0.95 (the T6's interval starts at 0 m), so it overlaps the C270's "none" at
+    # 30°, and the C270's colours were not measured: the rule cannot choose, and says so
     assert (
-        f"Farthest at 30°: {T6} works ≤ 2 m to ≥ 12 m at both 0° and 30° (far limit 95 % interval 0 to > 12 m)" in lead
+        f"The evidence cannot choose between {T6} and {C270}: their far limits at 30° overlap "
+        f"({T6} ≥ 12 m (95 %: 0 to > 12 m); {C270} none (95 %: < 2 m)) and colour separability does not break the "
+        f"tie ({T6} perfect, {C270} not measured): run with more frames." in lead
     )
-    assert f"LED: red: 2 mA behind foam + 3 white sheets ({power} mW per LED)" in lead
-    assert "Colours: perfect: no overlap" in lead
-    assert f"{C270} works 3 m to 9 m at 0°; reaches P ≥ 0.95 at no range at 30°" in lead
-    assert f"{T6_10} works ≤ 2 m to ≥ 10 m at 0° (webcam-vs-dslr, dark only)" in lead
+    assert "Rule: the camera with the largest far limit at the largest yaw tried (30°;" in lead
     answers = json.loads((main_job / "answers.json").read_text())
+    assert answers["decision"]["status"] == "tie" and answers["decision"]["camera"] is None
+    assert answers["decision"]["contenders"] == [T6, C270]
     c270 = next(c for c in answers["cameras"] if c["camera"] == C270)
     assert "3 of 3 frames nearer than 4 m fail (colour)" in c270["near_yaw"]
     assert c270["limit"] == "0°: resolution / merging beyond 9 m; colour nearer than 4 m; 30°: colour at every range"
     table = _tables(main_job / "index.html")[0]
     assert table["header"] == [
         "camera",
-        "working range at 0°",
-        "working range at 30°",
-        "LED drive and diffuser (radiant power)",
-        "colour separability",
-        "what limits it",
+        "working range at 0° (range-limit)",
+        "working range at 30° (range-limit)",
+        "LED drive and diffuser (brightness-diffuser)",
+        "colour separability (webcam-vs-dslr)",
+        "what limits it (range-limit)",
     ]
+    rows = {r[0]: r for r in table["rows"]}
     assert [r[0] for r in table["rows"]] == [T6, C270, T6_10]
-    assert "far limit 95 % interval: 0 to > 12 m" in table["rows"][0][1]
+    assert (
+        "far limit 95 % interval: 0 to > 12 m" in rows[T6][1]
+        and "range-limit: V2 red side, 2 mA, 18 frames" in rows[T6][1]
+    )
+    # one source per column: the T6 10 mm, which range-limit did not sweep, has no range from webcam-vs-dslr
+    assert rows[T6_10][1] == rows[T6_10][2] == "not in range-limit"
+    assert rows[T6][4].endswith("webcam-vs-dslr: green and red sides, 2 mA, 16 frames")
+    assert rows[T6][3].endswith("brightness-diffuser: red side") and rows[C270][4] == "not in webcam-vs-dslr"
     links = re.findall(r"href='([^']+)'", page)
     assert links == ["range-limit/report.html", "brightness-diffuser/report.html", "webcam-vs-dslr/report.html"]
+
+
+@pytest.mark.parametrize(
+    "page", ["index.html", "range-limit/report.html", "webcam-vs-dslr/report.html", "brightness-diffuser/report.html"]
+)
+def test_every_page_says_what_made_it(main_job, page):
+    text = _text(main_job / page)
+    assert "quick form" in text and "beacon-sim 9.8.7, commit 0123456789ab, 2031-05-06" in text
+    links = re.findall(r"href='([^']+)'", (main_job / page).read_text())
+    assert ("../index.html" in links) == (page != "index.html")  # every report links back to the index
 
 
 @pytest.mark.parametrize(
