@@ -4,3 +4,5 @@ Entry points: :func:`pipeline.detect.detect` (image → side, markers, pose, glo
 :func:`pipeline.evaluate.evaluate_detection` (scored against ground truth),
 :func:`pipeline.crlb.pose_crlb` (Cramér–Rao bound). Conventions: ``pipeline/CONVENTIONS.md``.
 """
+
+import scenes.tool_caches  # noqa: F401  (Dr.Jit and Matplotlib caches placed before either is imported)

@@ -32,7 +32,8 @@ from rich.logging import RichHandler
 from typer._click import exceptions as cli_errors  # typer's own (vendored) click
 
 from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study, unknowns
-from studies.cli.common import console, release_out_dirs
+from studies.cli.common import console
+from studies.cli.out_folder import folder_command, release_out_dirs
 
 COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
@@ -52,7 +53,7 @@ app = typer.Typer(
 )
 for _module in COMMAND_MODULES:
     for _name, _function in _module.COMMANDS.items():
-        app.command(_name)(_function)
+        app.command(_name)(folder_command(_name, _function))
 
 
 @functools.cache
@@ -157,6 +158,8 @@ class InterruptGuard:
             return
         with contextlib.suppress(OSError):
             os.write(2, f"\n{INTERRUPTED_MESSAGE}\n".encode())
+        with contextlib.suppress(Exception):
+            release_out_dirs()  # no lock file left behind by a render that would not unwind
         for child in multiprocessing.active_children():
             with contextlib.suppress(Exception):
                 child.kill()

@@ -21,7 +21,8 @@ from scenes.render import render as render_scenario
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import Scenario
 from studies.cli import options as opt
-from studies.cli.common import UsageError, check_render_cache, console, prepare_out_dir
+from studies.cli.common import UsageError, check_render_cache, console
+from studies.cli.out_folder import prepare_out_dir
 
 
 def _gain(cam, iso: float | None, gain: int | None) -> float:

@@ -1,11 +1,10 @@
-"""What every command shares: the console, one-line usage errors, output folders (with
-their lock), the render cache check, the execution of sweeps, the progress bar handed to
-long runs, and tables that never truncate names."""
+"""What every command shares: the console, one-line usage errors, the ``--out`` parser (the
+folders themselves: :mod:`studies.cli.out_folder`), the render cache check, the execution of
+sweeps, the progress bar handed to long runs, and tables that never truncate names."""
 
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import logging
 import math
 import os
@@ -29,9 +28,6 @@ log = logging.getLogger("beacon_sim")
 console = Console(stderr=True)
 """Messages, status spinners and progress bars go to stderr; results go to stdout."""
 
-LOCK_NAME = ".beacon-sim.lock"
-"""Lock file inside every output folder: one run at a time per folder (``fcntl.flock``)."""
-
 MAX_SEEDS = 10_000
 """Most noise seeds per condition a command accepts: every seed is a frame per grid point,
 so 10 000 already multiplies the grid's work ten-thousandfold (beyond it a run never ends)."""
@@ -39,10 +35,6 @@ so 10 000 already multiplies the grid's work ten-thousandfold (beyond it a run n
 
 class UsageError(ValueError):
     """Bad command-line input (one-line message)."""
-
-
-_LOCKS: dict[Path, int] = {}
-"""Output folders this process holds, resolved path → open lock file descriptor."""
 
 
 def out_path(text: str | Path) -> Path:
@@ -55,61 +47,6 @@ def out_path(text: str | Path) -> Path:
     if "\x00" in text:
         raise UsageError(f"expected a path without NUL characters, got {text!r}")
     return Path(text)
-
-
-def prepare_out_dir(out: Path, lock: bool = True) -> Path:
-    """Create ``out``, check it is writable and lock it for this run, or raise :class:`UsageError`.
-
-    The lock (``fcntl.flock`` on :data:`LOCK_NAME` inside ``out``, holding this process's pid)
-    is held until :func:`release_out_dirs` or the process ends, so a second run on the same
-    folder refuses instead of repeating the work. A folder this process already holds is not
-    locked again.
-    """
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise UsageError(f"out: cannot write to {out} ({exc.strerror or exc})") from None
-    if lock:
-        _lock(out)
-    return out
-
-
-def _lock(out: Path) -> None:
-    key = out.resolve()
-    if key in _LOCKS:
-        return
-    path = out / LOCK_NAME
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError as exc:
-        raise UsageError(f"out: cannot create the lock file {path} ({exc.strerror or exc})") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        other = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
-        os.close(fd)
-        raise UsageError(
-            f"out: expected a folder no other run is using, got {out} (in use by beacon-sim pid {other}; "
-            "wait for it to finish or choose another --out)"
-        ) from None
-    except OSError as exc:  # a file system without locks (some network mounts): run unlocked
-        os.close(fd)
-        log.warning("out: cannot lock %s (%s); another run on it would not be stopped", out, exc.strerror or exc)
-        return
-    os.ftruncate(fd, 0)
-    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-    _LOCKS[key] = fd
-
-
-def release_out_dirs() -> None:
-    """Release the locks of every output folder this process holds (the end of a command)."""
-    while _LOCKS:
-        _, fd = _LOCKS.popitem()
-        with contextlib.suppress(OSError):
-            os.close(fd)  # closing the only descriptor releases the flock
 
 
 def check_render_cache() -> Path:

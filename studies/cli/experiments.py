@@ -32,10 +32,10 @@ from studies.cli.common import (
     execution,
     out_path,
     parse_list,
-    prepare_out_dir,
     print_table,
     rich_progress,
 )
+from studies.cli.out_folder import prepare_out_dir
 from studies.engine import colour_reach as reach
 from studies.experiments import bench as b
 from studies.experiments import crop_vs_full as cvf

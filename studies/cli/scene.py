@@ -19,7 +19,8 @@ from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import Scenario
 from scenes.view import project
 from studies.cli import options as opt
-from studies.cli.common import check_render_cache, console, prepare_out_dir
+from studies.cli.common import check_render_cache, console
+from studies.cli.out_folder import prepare_out_dir
 
 
 @opt.scenario_command

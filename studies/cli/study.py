@@ -14,7 +14,8 @@ from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
 from studies.cli import options as opt
-from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, prepare_out_dir
+from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list
+from studies.cli.out_folder import prepare_out_dir
 from studies.engine.report import page_context
 from studies.engine.run_log import timed_part
 from studies.engine.sequential import SequentialDesign, candidate_ranges
@@ -120,7 +121,7 @@ def study(
     settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
     design = _design(name, quick, settings, options)
     execution = _execution(workers, scheduler)
-    prepare_out_dir(out)
+    prepare_out_dir(out, part=name)
     t0 = time.perf_counter()
     with timed_part(out, name), page_context(quick=quick or None):
         if design is None:

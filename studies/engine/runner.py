@@ -30,6 +30,7 @@ import hashlib
 import json
 import os
 import signal
+import stat
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -121,6 +122,9 @@ class ResultStore:
     def put(self, key: str, rows: list[dict]) -> None:
         """Store ``rows`` for ``key`` atomically."""
         path = self.path(key)
+        for folder in (Path(self.root), path.parent):
+            if folder.is_symlink():  # the file would be written wherever the link points
+                raise ValueError(f"out: expected no symbolic links inside the output folder, got {folder}")
         path.parent.mkdir(parents=True, exist_ok=True)
         record = {"key": key, "sha256": _digest(rows), "rows": rows}
         atomic_write_bytes(path, json.dumps(record, sort_keys=True, allow_nan=True).encode())
@@ -151,9 +155,28 @@ class MachineLog:
         ]
         if not lines:
             return
-        new = not self.path.exists()
-        with open(self.path, "a", encoding="utf-8") as f:
-            f.write(("task,row,field,value\n" if new else "") + "".join(lines))
+        fd = open_in_place(self.path)
+        with os.fdopen(fd, "a", encoding="utf-8") as f:
+            f.write(("task,row,field,value\n" if os.fstat(fd).st_size == 0 else "") + "".join(lines))
+
+
+def open_in_place(path: Path) -> int:
+    """Open ``path`` for appending, created if missing: never through a symbolic link
+    (``O_NOFOLLOW``), nor a file with other hard links (appending would write into another
+    file), else a one-line ``ValueError`` naming the path."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o666)
+    except OSError:
+        if os.path.islink(path):
+            raise ValueError(f"out: expected no symbolic links inside the output folder, got {path}") from None
+        raise
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+        os.close(fd)
+        raise ValueError(
+            f"out: expected {path} to be a plain file of this folder, got one with {st.st_nlink} hard links"
+        )
+    return fd
 
 
 def task_key(function: TaskFunction, task: dict, version: int) -> str:
