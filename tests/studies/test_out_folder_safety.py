@@ -167,7 +167,7 @@ def test_main_jobs_study_folders_belong_to_the_main_job(work, monkeypatch):
 
     for module in STUDIES.values():
         monkeypatch.setattr(module, "run", lambda out, options, execution, **kwargs: None)
-    monkeypatch.setattr(study, "write_index", lambda out, elapsed_s: None)
+    monkeypatch.setattr(study, "write_index", lambda out, elapsed_s, **kwargs: None)
     assert invoke(["main-job", "--out", "m"])[0] == 0
     sub = work / "m" / "range-limit"
     assert json.loads((sub / MARKER).read_text())["command"] == "main-job"
