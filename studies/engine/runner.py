@@ -418,13 +418,24 @@ def _run_dask(
             while not waiting.is_empty():
                 ready = waiting.next_batch(block=False)
                 for future in ready:
-                    _store_batch(store, futures[future], future.result(), advance, log)
+                    rows = _dask_result(future, lambda: watchdog.observe(len(client.nthreads()), waiting.count()))
+                    _store_batch(store, futures[future], rows, advance, log)
                 if not ready:  # nothing finished: is anyone still working on it?
                     watchdog.observe(len(client.nthreads()), waiting.count())
                     time.sleep(DASK_POLL_S)
         except (KeyboardInterrupt, SystemExit, NoWorkersError):
             client.cancel(list(futures))  # the cluster stops this sweep's tasks; finished ones are stored
             raise
+
+
+def _dask_result(future, check: Callable[[], None]) -> list[list[dict]]:
+    """A finished Dask future's result; while it is unavailable (its result was lost with a
+    worker and waits to be computed again) ``check`` runs between tries (the watchdog)."""
+    while True:
+        try:
+            return future.result(timeout=DASK_POLL_S)
+        except TimeoutError:
+            check()
 
 
 def selftest_task(task: dict) -> list[dict]:

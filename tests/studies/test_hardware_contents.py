@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import shutil
+import threading
 import time
 from pathlib import Path
 
@@ -159,6 +160,31 @@ def test_hole11_a_cluster_without_workers_fails_in_one_line(tmp_path):
     assert "\n" not in message
     assert message.startswith("scheduler: no worker connected to the Dask scheduler at ")
     assert "for 1 s with 3 task batches unfinished" in message and "run the same command again to resume" in message
+
+
+def test_hole11_every_worker_lost_mid_run_fails_in_one_line_and_resumes(tmp_path):
+    """The cluster's only worker leaves after the first tasks: the sweep stops after the timeout
+    (it waited silently for ever), the finished tasks stay stored and a later run finishes them."""
+    distributed = pytest.importorskip("dask.distributed")
+    from studies.engine.runner import NoWorkersError
+
+    tasks = [{"seed": s, "n": 10, "sleep_s": 0.4} for s in range(8)]
+    options = {"threads_per_worker": 1, "processes": False, "dashboard_address": None}
+    with distributed.LocalCluster(n_workers=1, **options) as cluster:
+
+        def lose_the_worker_after_the_first_task() -> None:
+            deadline = time.monotonic() + 60
+            while not list(tmp_path.rglob("*.json")) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            cluster.scale(0)
+
+        threading.Thread(target=lose_the_worker_after_the_first_task, daemon=True).start()
+        with pytest.raises(NoWorkersError, match=r"for 2 s with \d task batches unfinished"):
+            run_tasks(tasks, tmp_path, selftest_task, scheduler=cluster.scheduler_address, no_worker_timeout_s=2.0)
+    stored = len(list((tmp_path / "tasks").rglob("*.json")))
+    assert 0 < stored < len(tasks)
+    reference = run_tasks(tasks, tmp_path / "ref", selftest_task, workers=1)
+    assert run_tasks(tasks, tmp_path, selftest_task, workers=1) == reference
 
 
 def test_the_watchdog_counts_time_without_any_worker():
