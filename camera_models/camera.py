@@ -9,6 +9,7 @@ Every number carries a ``source`` or an ``assumed`` note (:func:`scenes.sourced.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
@@ -20,9 +21,9 @@ from numpy.typing import NDArray
 
 from camera_models.glare import GlareSpread, OpticsEffects
 from scenes import spectra
-from scenes.hardware import hardware_file
-from scenes.sourced import DataFileError, Fields, load_sourced
-from scenes.view import CAMERA_DATA_DIR, CameraGeometry, camera_geometry
+from scenes.hardware import HardwareFile, hardware_source
+from scenes.sourced import DataFileError, Fields, loads_sourced
+from scenes.view import CAMERA_DATA_DIR, CameraGeometry, geometry_from_fields
 
 BODY_DIR = CAMERA_DATA_DIR / "bodies"
 SSF_DIR = CAMERA_DATA_DIR / "ssf"
@@ -225,14 +226,20 @@ def _finite(x) -> bool:
 
 
 def load_ssf_qe(csv_path: Path, peak_qe: float, energy_response: bool) -> NDArray[np.float64]:
+    """Quantum efficiency per channel on :data:`spectra.WAVELENGTHS_NM`, electrons/photon,
+    from a spectral-sensitivity CSV file (:func:`ssf_qe` of its text)."""
+    return ssf_qe(Path(csv_path).read_text(encoding="utf-8"), peak_qe, energy_response)
+
+
+def ssf_qe(csv_text: str, peak_qe: float, energy_response: bool) -> NDArray[np.float64]:
     """Quantum efficiency per channel on :data:`spectra.WAVELENGTHS_NM`, electrons/photon.
 
-    The curves (relative response to spectral radiance, 10 nm steps) are interpolated
-    to 1 nm; an energy response s(λ) becomes a photon response s(λ)/λ; the result is
-    scaled so the green channel's peak equals ``peak_qe``.
+    ``csv_text`` has columns ``wavelength_nm, r, g, b``. The curves (relative response to
+    spectral radiance, 10 nm steps) are interpolated to 1 nm; an energy response s(λ)
+    becomes a photon response s(λ)/λ; the result is scaled so the green channel's peak
+    equals ``peak_qe``.
     """
-    with open(csv_path, encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
+    rows = list(csv.DictReader(io.StringIO(csv_text)))
     lam = np.array([float(r["wavelength_nm"]) for r in rows])
     rgb = np.array([[float(r[c]) for r in rows] for c in "rgb"])
     qe = np.stack([np.interp(spectra.WAVELENGTHS_NM, lam, ch, left=0.0, right=0.0) for ch in rgb])
@@ -266,9 +273,11 @@ def camera_to_xyz_from_ssf(qe_rgb: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def load_camera(name: str) -> Camera:
-    """The camera called ``name`` (see ``camera_names()``); unknown names and bad files raise ValueError."""
-    path = hardware_file("camera", name)
-    return _camera_from_file(name, path, path.stat().st_mtime_ns)
+    """The camera called ``name`` (see ``camera_names()``); unknown names and bad files raise ValueError.
+
+    The camera is made from the contents its file was read with (:func:`scenes.hardware.hardware_source`),
+    never from a path: a run's workers compute with the contents its key covers."""
+    return _camera_from_source(hardware_source("camera", name))
 
 
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
@@ -282,21 +291,31 @@ DISTORTION_TERMS = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "equidistant": 
 
 
 @lru_cache(maxsize=16)
-def _camera_from_file(name: str, path: Path, _mtime_ns: int) -> Camera:
-    """Load and check a camera file: every field is checked with a one-line error naming it."""
-    geometry = camera_geometry(name)
-    values, _ = load_sourced(path)
-    top = Fields(values, f"camera file {path.name}")
+def _camera_from_source(source: HardwareFile) -> Camera:
+    """Load and check a camera file's contents: every field is checked with a one-line error
+    naming it, and a field no part of the model reads (a misspelt key) is an error naming the
+    nearest field that exists."""
+    values, _ = loads_sourced(source.text, source.label)
+    top = Fields(values, f"camera file {source.label}")
+    geometry = geometry_from_fields(top)
     if top.has("body"):  # a built-in body shared by several lenses
         bodies = sorted(p.stem for p in BODY_DIR.glob("*.toml"))
         body_name = top.text("body", choices=tuple(bodies))
-        body = Fields(load_sourced(BODY_DIR / f"{body_name}.toml")[0], f"body file {body_name}.toml")
+        data = source.named_file("body", body_name)
+        if data is None:
+            raise DataFileError(f"{top.file}: body: cannot read the body file {body_name}.toml")
+        label = f"body file {body_name}.toml"
+        body = Fields(loads_sourced(data.decode("utf-8"), label)[0], label)
+        body.text("name")
     else:  # sensor, image processing and exposure written in the camera file itself
         body = top
     lens = _lens(top.table("optics"))
-    sensor = _sensor(body.table("sensor"), path.parent)
+    sensor = _sensor(body.table("sensor"), source)
     isp = _isp(body.table("isp"), sensor)
     exposure = _exposure(body.table("exposure"))
+    top.check_known()
+    if body is not top:
+        body.check_known()
     return Camera(geometry.name, geometry, lens, sensor, isp, exposure)
 
 
@@ -330,43 +349,51 @@ def _lens(o: Fields) -> LensModel:
     )
 
 
+RELATIVE_ILLUMINATION_MODELS = ("natural", "vignetting")
+"""``[optics.relative_illumination] model``: the lens's natural fall-off (no vignetting data) or
+the lensfun ``[[optics.vignetting]]`` entries (:func:`camera_models.optics.relative_illumination`)."""
+
+
 def _vignetting(o: Fields) -> tuple[VignettingEntry, ...]:
-    entries = [Fields(v, o.file, f"{o.prefix}vignetting[{i}].") for i, v in enumerate(_list(o, "vignetting"))]
     terms = ("f_number", "k1", "k2", "k3")
-    out = (VignettingEntry(**{k: e.number(k, positive=k == "f_number") for k in terms}) for e in entries)
-    return tuple(sorted(out, key=lambda e: e.f_number))
+    out = (VignettingEntry(**{k: e.number(k, positive=k == "f_number") for k in terms}) for e in o.tables("vignetting"))
+    entries = tuple(sorted(out, key=lambda e: e.f_number))
+    if o.has("relative_illumination"):  # says which model applies; it must agree with the data
+        ri = o.table("relative_illumination")
+        model = ri.text("model", choices=RELATIVE_ILLUMINATION_MODELS)
+        if (model == "vignetting") != bool(entries):
+            expected = "vignetting (the file has [[optics.vignetting]] entries)" if entries else "natural"
+            raise DataFileError(f"{ri.file}: {ri.prefix}model: expected {expected}, got {model!r}")
+    return entries
 
 
-def _list(table: Fields, key: str) -> list:
-    value = table.values.get(key, [])
-    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-        raise DataFileError(f"{table.file}: {table.prefix}{key}: expected a list of tables ([[...]]), got {value!r}")
-    return value
-
-
-def _ssf_path(s: Fields, folder: Path) -> Path:
-    """The spectral-sensitivity CSV: a built-in one (``data/ssf``) or a file next to the camera file."""
+def _ssf_text(s: Fields, source: HardwareFile) -> str:
+    """The spectral-sensitivity CSV's text: a built-in one (``data/ssf``) or a file next to the
+    camera file, as read with the camera file (:data:`scenes.hardware.REFERENCES`)."""
     name = s.text("ssf_csv")
-    builtin = {p.name: p for p in SSF_DIR.glob("*.csv")}
-    path = builtin.get(name) or (folder / name)
-    if not path.is_file():
+    data = source.named_file("sensor.ssf_csv", name)
+    if data is None:
+        builtin = sorted(p.name for p in SSF_DIR.glob("*.csv"))
         raise DataFileError(
-            f"{s.file}: {s.prefix}ssf_csv: expected one of {', '.join(sorted(builtin))} or a CSV next to the "
+            f"{s.file}: {s.prefix}ssf_csv: expected one of {', '.join(builtin)} or a CSV next to the "
             f"camera file, got {name!r}"
         )
-    return path
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise DataFileError(f"{s.file}: {s.prefix}ssf_csv: expected a UTF-8 CSV file, got {name!r}") from None
 
 
-def _sensor(s: Fields, folder: Path) -> SensorModel:
+def _sensor(s: Fields, source: HardwareFile) -> SensorModel:
     uses_iso = s.has("base_iso")
     bits = s.number("adc_bits", integer=True, minimum=8, maximum=16)
     black = s.number("black_level_DN", minimum=0.0)
     white = s.number("white_level_DN", positive=True, maximum=2**bits - 1)
     if white <= black:
         raise DataFileError(f"{s.file}: {s.prefix}white_level_DN: expected a number > black_level_DN, got {white!r}")
-    ssf = _ssf_path(s, folder)
+    ssf = _ssf_text(s, source)
     try:
-        qe = load_ssf_qe(ssf, s.number("peak_qe", positive=True, maximum=1.0), _flag(s, "ssf_is_energy_response"))
+        qe = ssf_qe(ssf, s.number("peak_qe", positive=True, maximum=1.0), s.flag("ssf_is_energy_response"))
     except (KeyError, ValueError) as exc:
         raise DataFileError(
             f"{s.file}: {s.prefix}ssf_csv: expected a CSV with columns wavelength_nm, r, g, b ({exc})"
@@ -415,53 +442,71 @@ def _sensor(s: Fields, folder: Path) -> SensorModel:
     )
 
 
-def _flag(table: Fields, key: str) -> bool:
-    value = table.values.get(key)
-    if not isinstance(value, bool):
-        raise DataFileError(f"{table.file}: {table.prefix}{key}: expected true or false, got {value!r}")
-    return value
+COLOUR_MATRICES = ("from-ssf",)
+"""``[isp] colour_matrix`` without ``xyz_to_camera``: the matrix fitted to the sensitivities."""
+
+NR_KEYS = ("nr_analog_gain", "nr_luma_h", "nr_chroma_h")
+"""Noise-reduction strengths of a processing option: analog gains and the filter's h at each."""
 
 
 def _isp(i: Fields, sensor: SensorModel) -> ISPModel:
     if i.has("xyz_to_camera"):  # DNG-style matrix for raw (unbalanced) camera RGB; make it act on balanced RGB
-        rows = i.values["xyz_to_camera"]
+        rows = i.raw("xyz_to_camera")
         if not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows)):
             raise DataFileError(f"{i.file}: {i.prefix}xyz_to_camera: expected a 3x3 matrix, got {rows!r}")
+        if i.has("colour_matrix"):
+            raise DataFileError(
+                f"{i.file}: {i.prefix}colour_matrix: expected nothing beside xyz_to_camera (which sets the matrix), "
+                f"got {i.raw('colour_matrix')!r}"
+            )
         xyz_to_camera = _matrix(rows)
         d65 = np.array([0.95047, 1.0, 1.08883])  # CIE D65 white, Y = 1 (CIE 15:2004)
         neutral = xyz_to_camera @ d65
         camera_to_xyz = np.linalg.inv(xyz_to_camera) @ np.diag(neutral / neutral[1])
     else:
+        i.text("colour_matrix", choices=COLOUR_MATRICES, default="from-ssf")
         camera_to_xyz = camera_to_xyz_from_ssf(sensor.qe_rgb)
     profiles = i.table("processing_options", default={})
     processing = i.text("processing", choices=tuple(profiles.values) or ("legacy",), default="legacy")
-    pp = profiles.table(processing, default={})
+    tone_curve = i.text("tone_curve", TONE_CURVES, "srgb")
+    # every option is checked, the chosen one used
+    options = {k: _processing_option(profiles.table(k), tone_curve) for k in profiles.values}
+    chosen = options.get(processing) or _processing_option(Fields({}, i.file), tone_curve)
     # the noise-reduction strengths belong to the body: kept whichever option is chosen, so a run
     # can switch noise reduction on by itself (camera override "isp.noise_reduction")
-    nr = next(
-        (t for t in (pp, *(profiles.table(k) for k in profiles.values)) if t.has("nr_analog_gain")),
-        Fields({}, i.file),
-    )
-    nr_keys = ("nr_analog_gain", "nr_luma_h", "nr_chroma_h")
-    nr_values = {k: nr.numbers(k, minimum=0.0) if nr.has(k) else () for k in nr_keys}
-    if len({len(v) for v in nr_values.values()}) > 1:
-        raise DataFileError(f"{nr.file}: {nr.prefix}nr_luma_h: expected as many strengths as nr_analog_gain")
+    nr = next((o["nr"] for o in (chosen, *options.values()) if o["nr"]["nr_analog_gain"]), chosen["nr"])
     return ISPModel(
         demosaic=i.text("demosaic", choices=("bilinear",)),
         white_balance=i.text("white_balance", choices=("daylight", "auto")),
         awb_max_gain_ratio=i.number("awb_max_gain_ratio", minimum=1.0, default=1.0),
         camera_to_xyz=camera_to_xyz,
-        tone_curve=pp.text("tone_curve", choices=TONE_CURVES, default=i.text("tone_curve", TONE_CURVES, "srgb")),
+        tone_curve=chosen["tone_curve"],
         jpeg_quality=i.number("jpeg_quality", integer=True, minimum=1, maximum=100),
         chroma_subsampling=i.text("chroma_subsampling", choices=CHROMA_SUBSAMPLINGS),
         processing=processing,
-        highlight=pp.text("highlight", choices=HIGHLIGHT_MODES, default="clip"),
-        noise_reduction=pp.text("noise_reduction", choices=NOISE_REDUCTION_METHODS, default="none"),
-        **nr_values,
-        tone_contrast=pp.number("tone_contrast", minimum=0.0, maximum=1.0, default=0.0),
-        sharpening_amount=pp.number("sharpening_amount", minimum=0.0, maximum=5.0, default=0.0),
-        sharpening_sigma_px=pp.number("sharpening_sigma_px", positive=True, default=1.0),
+        highlight=chosen["highlight"],
+        noise_reduction=chosen["noise_reduction"],
+        **nr,
+        tone_contrast=chosen["tone_contrast"],
+        sharpening_amount=chosen["sharpening_amount"],
+        sharpening_sigma_px=chosen["sharpening_sigma_px"],
     )
+
+
+def _processing_option(pp: Fields, tone_curve: str) -> dict:
+    """One ``[isp.processing_options.<name>]`` table, checked (its stages after white balance)."""
+    nr = {k: pp.numbers(k, minimum=0.0) if pp.has(k) else () for k in NR_KEYS}
+    if len({len(v) for v in nr.values()}) > 1:
+        raise DataFileError(f"{pp.file}: {pp.prefix}nr_luma_h: expected as many strengths as nr_analog_gain")
+    return {
+        "tone_curve": pp.text("tone_curve", choices=TONE_CURVES, default=tone_curve),
+        "highlight": pp.text("highlight", choices=HIGHLIGHT_MODES, default="clip"),
+        "noise_reduction": pp.text("noise_reduction", choices=NOISE_REDUCTION_METHODS, default="none"),
+        "nr": nr,
+        "tone_contrast": pp.number("tone_contrast", minimum=0.0, maximum=1.0, default=0.0),
+        "sharpening_amount": pp.number("sharpening_amount", minimum=0.0, maximum=5.0, default=0.0),
+        "sharpening_sigma_px": pp.number("sharpening_sigma_px", positive=True, default=1.0),
+    }
 
 
 def _exposure(e: Fields) -> ExposureModel:
@@ -520,9 +565,9 @@ def camera_template(like: str = "canon-t6-18mm") -> str:
     of a ``body = ...`` reference, named ``my-camera``; it loads as a camera identical to
     ``like`` apart from its name.
     """
-    path = hardware_file("camera", like)
-    lines = path.read_text(encoding="utf-8").splitlines()
-    body_name = load_sourced(path)[0].get("body")
+    source = hardware_source("camera", like)
+    lines = source.text.splitlines()
+    body_name = loads_sourced(source.text, source.label)[0].get("body")
     header = [
         f"# A camera file for beacon-sim, made from '{like}' (beacon-sim cameras --template --like {like}).",
         "# Edit every value for your camera and lens; give each number a `source` (data sheet, measurement)",
@@ -538,7 +583,7 @@ def camera_template(like: str = "canon-t6-18mm") -> str:
         elif not line.startswith("body ="):
             out.append(line)
     if body_name is not None:
-        body_lines = (BODY_DIR / f"{body_name}.toml").read_text(encoding="utf-8").splitlines()
+        body_lines = (source.named_file("body", body_name) or b"").decode("utf-8").splitlines()
         out += ["", f"# sensor, image processing and exposure (from the body '{body_name}')"]
         out += [line for line in body_lines if not line.startswith("name =")]
     return "\n".join(out) + "\n"

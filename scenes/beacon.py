@@ -20,14 +20,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from scenes.hardware import hardware_file, hardware_names
+from scenes.hardware import HardwareFile, hardware_names, hardware_source
 from scenes.led import SIDE_COLOURS
-from scenes.sourced import DataFileError, Fields, load_sourced
+from scenes.sourced import DataFileError, Fields, loads_sourced
 
 HOUSING_FINISHES = ("white", "black")
 
@@ -141,15 +140,16 @@ def load_beacons() -> dict[str, BeaconDesign]:
 
 def beacon_design(name: str) -> BeaconDesign:
     """The design called ``name`` (``v1``, ``v2`` or a user's file); one-line errors."""
-    path = hardware_file("beacon", name)
-    return _design_from_file(path, path.stat().st_mtime_ns)
+    return _design_from_source(hardware_source("beacon", name))
 
 
 @lru_cache(maxsize=16)
-def _design_from_file(path: Path, _mtime_ns: int) -> BeaconDesign:
-    """Load and check a beacon file (``scenes/data/beacons/v2.toml`` shows the form)."""
-    values, _ = load_sourced(path)
-    f = Fields(values, f"beacon file {path.name}")
+def _design_from_source(source: HardwareFile) -> BeaconDesign:
+    """Load and check a beacon file's contents (``scenes/data/beacons/v2.toml`` shows the form):
+    every field is checked with a one-line error naming it; a field nothing reads (a misspelt
+    key) is an error naming the nearest field that exists."""
+    values, _ = loads_sourced(source.text, source.label)
+    f = Fields(values, f"beacon file {source.label}")
     mm = 1e-3
     arm = f.number("arm_length_mm", positive=True, maximum=2000.0) * mm
     out = f.number("out_of_plane_mm", minimum=0.0, maximum=2000.0) * mm
@@ -161,29 +161,52 @@ def _design_from_file(path: Path, _mtime_ns: int) -> BeaconDesign:
     lit_face = f.number("lit_face_diameter_mm", positive=True, maximum=200.0) * mm
     if 0.5 * lit_face >= arm:
         raise DataFileError(f"{f.file}: arm_length_mm: expected more than the lit-face radius, got {arm / mm:g}")
-    return BeaconDesign(
+    d_t = f.number("d_t_mm", positive=True, maximum=5000.0) * mm
+    depth = f.number("housing_depth_mm", positive=True, maximum=500.0) * mm
+    arm_width = f.number("arm_width_mm", positive=True, maximum=200.0) * mm
+    # the node's enclosure stands on the beacon's axis behind the four targets: its radius must
+    # clear the backs of their housings and arms (else the targets sit inside it)
+    clear_mm = (d_t - out - depth - arm_width) / mm
+    if clear_mm <= 0:
+        raise DataFileError(
+            f"{f.file}: d_t_mm: expected more than out_of_plane_mm + housing_depth_mm + arm_width_mm "
+            f"({(out + depth + arm_width) / mm:g}: the targets' backs must lie in front of the axis), got {d_t / mm:g}"
+        )
+    node_radius = (
+        f.number(
+            "node_radius_mm",
+            positive=True,
+            maximum=clear_mm,
+            reason="d_t_mm - out_of_plane_mm - housing_depth_mm - arm_width_mm: the node must stand behind "
+            "the targets' backs",
+        )
+        * mm
+    )
+    design = BeaconDesign(
         name=f.text("name"),
         description=f.text("description", default=""),
         markers=_markers(arm, out, face),
         arm_length_m=arm,
         out_of_plane_m=out,
-        d_t_m=f.number("d_t_mm", positive=True, maximum=5000.0) * mm,
+        d_t_m=d_t,
         lit_face_diameter_m=lit_face,
         housing_wall_m=f.number("housing_wall_mm", positive=True, maximum=50.0) * mm,
-        housing_depth_m=f.number("housing_depth_mm", positive=True, maximum=500.0) * mm,
-        arm_width_m=f.number("arm_width_mm", positive=True, maximum=200.0) * mm,
-        node_radius_m=f.number("node_radius_mm", positive=True, maximum=5000.0) * mm,
+        housing_depth_m=depth,
+        arm_width_m=arm_width,
+        node_radius_m=node_radius,
         node_height_m=f.number("node_height_mm", positive=True, maximum=10_000.0) * mm,
         target_height_m=f.number("target_height_mm", positive=True, maximum=10_000.0) * mm,
         lit_face_reflectance=f.number("lit_face_reflectance", minimum=0.0, maximum=1.0),
         housing_reflectance=r,
         housing_transmittance=t,
     )
+    f.check_known()
+    return design
 
 
 def beacon_template(like: str = "v2") -> str:
     """A complete beacon file to copy and edit: the beacon ``like``'s file, named ``my-beacon``."""
-    lines = hardware_file("beacon", like).read_text(encoding="utf-8").splitlines()
+    lines = hardware_source("beacon", like).text.splitlines()
     out = [
         f"# A beacon file for beacon-sim, made from '{like}' (beacon-sim beacons --template --like {like}).",
         "# Edit every value for your beacon; give each number a `source` or an `assumed` note.",

@@ -10,9 +10,15 @@ Plain strings and booleans (names, part numbers) need no provenance.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from pathlib import Path
 from typing import Any
+
+__all__ = ["DATA_DIR", "DataFileError", "Fields", "load_sourced", "loads_sourced"]
+
+VALUE_KEYS = ("value", "source", "assumed")
+"""The keys of a number's inline table: the value and one of the two provenance notes."""
 
 
 class DataFileError(ValueError):
@@ -25,6 +31,9 @@ def _strip(node: Any, where: str, provenance: dict[str, str]) -> Any:
             has = [k for k in ("source", "assumed") if k in node]
             if len(has) != 1:
                 raise DataFileError(f"{where}: needs exactly one of 'source' or 'assumed'")
+            extra = [k for k in node if k not in VALUE_KEYS]
+            if extra:
+                raise DataFileError(f"{where}.{extra[0]}: {_unknown(extra[0], VALUE_KEYS)}")
             provenance[where] = f"{has[0]}: {node[has[0]]}"
             return node["value"]
         return {k: _strip(v, f"{where}.{k}" if where else k, provenance) for k, v in node.items()}
@@ -41,15 +50,37 @@ def load_sourced(path: str | Path) -> tuple[dict[str, Any], dict[str, str]]:
     """Load a data file; return (values, provenance by dotted key)."""
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise DataFileError(f"{path}: cannot read data file ({exc})") from exc
+    return loads_sourced(text, str(path))
+
+
+def loads_sourced(text: str, label: str) -> tuple[dict[str, Any], dict[str, str]]:
+    """:func:`load_sourced` of a data file's text; errors name the file as ``label``."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise DataFileError(f"{label}: cannot read data file ({exc})") from exc
+    except RecursionError:
+        raise DataFileError(f"{label}: cannot read data file (nested too deeply)") from None
     provenance: dict[str, str] = {}
     try:
         values = _strip(raw, "", provenance)
     except DataFileError as exc:
-        raise DataFileError(f"{path}: {exc}") from None
+        raise DataFileError(f"{label}: {exc}") from None
+    except RecursionError:
+        raise DataFileError(f"{label}: cannot read data file (nested too deeply)") from None
     return values, provenance
+
+
+def _unknown(key: str, valid) -> str:
+    """``unknown field (did you mean 'x'?)``, or the valid names when none is close."""
+    valid = sorted(set(valid))
+    near = difflib.get_close_matches(key, valid, n=1)
+    if near:
+        return f"unknown field (did you mean {near[0]!r}?)"
+    return f"unknown field (expected one of {', '.join(valid)})" if valid else "unknown field (expected none here)"
 
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -75,29 +106,77 @@ class Fields:
         Dotted path of this table inside the file ("" for the top level).
     """
 
-    def __init__(self, values: dict[str, Any], file: str, prefix: str = "") -> None:
+    def __init__(self, values: dict[str, Any], file: str, prefix: str = "", *, _asked=None) -> None:
         self.values, self.file, self.prefix = values, file, prefix
+        # fields asked for, by table (prefix), shared by every Fields of one file: what
+        # check_known compares the file's keys with
+        self._asked: dict[str, tuple[dict, set[str]]] = {} if _asked is None else _asked
+        self._asked.setdefault(prefix, (values, set()))
+
+    def _mark(self, key: str) -> None:
+        self._asked[self.prefix][1].add(key)
 
     def _fail(self, key: str, expected: str, got: object) -> DataFileError:
         return DataFileError(f"{self.file}: {self.prefix}{key}: expected {expected}, got {got!r}")
 
     def has(self, key: str) -> bool:
-        """Whether the table has ``key``."""
+        """Whether the table has ``key`` (``key`` is then a field this table may hold)."""
+        self._mark(key)
         return key in self.values
 
     def _get(self, key: str, default: object, expected: str) -> Any:
+        self._mark(key)
         if key in self.values:
             return self.values[key]
         if default is _MISSING:
             raise self._fail(key, expected, "nothing (missing)")
         return default
 
+    def _child(self, values: dict, prefix: str) -> Fields:
+        return Fields(values, self.file, prefix, _asked=self._asked)
+
     def table(self, key: str, default: object = _MISSING) -> Fields:
         """The sub-table ``key``."""
         value = self._get(key, default, "a table")
         if not isinstance(value, dict):
             raise self._fail(key, "a table", value)
-        return Fields(value, self.file, f"{self.prefix}{key}.")
+        return self._child(value, f"{self.prefix}{key}.")
+
+    def tables(self, key: str) -> list[Fields]:
+        """The list of tables ``key`` (``[[key]]``; none when missing)."""
+        value = self._get(key, [], "a list of tables ([[...]])")
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self._fail(key, "a list of tables ([[...]])", value)
+        return [self._child(v, f"{self.prefix}{key}[{i}].") for i, v in enumerate(value)]
+
+    def raw(self, key: str, default: object = _MISSING) -> Any:
+        """The value ``key`` unchecked (the caller checks it)."""
+        return self._get(key, default, "a value")
+
+    def flag(self, key: str, default: object = _MISSING) -> bool:
+        """The boolean ``key``."""
+        value = self._get(key, default, "true or false")
+        if not isinstance(value, bool):
+            raise self._fail(key, "true or false", value)
+        return value
+
+    def check_known(self, within: str | None = None) -> None:
+        """Raise on the first field no accessor asked for (a misspelt or unknown key), naming it
+        and the nearest field the table may hold (``difflib``).
+
+        Parameters
+        ----------
+        within
+            Check only the tables whose dotted path starts with this (default: this table
+            and every table below it that was read).
+        """
+        within = self.prefix if within is None else within
+        for prefix, (values, asked) in self._asked.items():
+            if not prefix.startswith(within):
+                continue
+            for key in values:
+                if key not in asked:
+                    raise DataFileError(f"{self.file}: {prefix}{key}: {_unknown(key, asked)}")
 
     def text(self, key: str, choices: tuple[str, ...] | None = None, default: object = _MISSING) -> str:
         """The string ``key``, one of ``choices`` when given."""
@@ -116,9 +195,11 @@ class Fields:
         positive: bool = False,
         integer: bool = False,
         default: object = _MISSING,
+        reason: str | None = None,
     ) -> float:
-        """The finite number ``key`` (a float, or an int when ``integer``) within the bounds."""
-        expected = _number_words(minimum, maximum, positive, integer)
+        """The finite number ``key`` (a float, or an int when ``integer``) within the bounds;
+        ``reason`` says why the bounds are what they are (in the error, in brackets)."""
+        expected = _number_words(minimum, maximum, positive, integer) + (f" ({reason})" if reason else "")
         value = self._get(key, default, expected)
         if not _in_bounds(value, minimum, maximum, positive, integer):
             raise self._fail(key, expected, value)

@@ -15,13 +15,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from scenes.hardware import PACKAGE_DIRS, hardware_file, hardware_names
-from scenes.sourced import Fields, load_sourced
+from scenes.hardware import PACKAGE_DIRS, HardwareFile, hardware_names, hardware_source
+from scenes.sourced import DataFileError, Fields, loads_sourced
 
 CAMERA_DATA_DIR = PACKAGE_DIRS["camera"]
 """The camera files: one TOML per camera + lens (the camera models read the rest of each)."""
@@ -140,20 +139,52 @@ def camera_names() -> list[str]:
 
 def camera_geometry(name: str) -> CameraGeometry:
     """Geometry of the camera called ``name`` (e.g. ``canon-t6-18mm``); one-line errors."""
-    path = hardware_file("camera", name)
-    return _geometry_from_file(path, path.stat().st_mtime_ns)
+    return _geometry_from_source(hardware_source("camera", name))
+
+
+MAX_SIDE_PX = 20_000
+"""Largest image width or height, pixels: above the largest image sensors made (Phase One IQ4
+150MP, 14204 × 10652 px; Canon's 250 MP APS-H prototype, 19580 × 12600 px)."""
+
+MAX_PIXELS = 250_000_000
+"""Largest width × height, pixels (the 250 MP prototype above): a whole-frame capture holds
+several arrays of that many pixels, so a larger grid would only exhaust the memory."""
+
+MIN_PIXEL_PITCH_UM = 0.5
+"""Smallest pixel pitch, µm: below the smallest pixels made (0.56 µm, Samsung ISOCELL HP3, 2022)."""
 
 
 @lru_cache(maxsize=32)
-def _geometry_from_file(path: Path, _mtime_ns: int) -> CameraGeometry:
-    values, _ = load_sourced(path)
-    top = Fields(values, f"camera file {path.name}")
+def _geometry_from_source(source: HardwareFile) -> CameraGeometry:
+    values, _ = loads_sourced(source.text, source.label)
+    top = Fields(values, f"camera file {source.label}")
+    geometry = geometry_from_fields(top)
+    top.check_known(within="geometry.")
+    return geometry
+
+
+def geometry_from_fields(top: Fields) -> CameraGeometry:
+    """The :class:`CameraGeometry` of a camera file's fields (its ``name``, ``description`` and
+    ``[geometry]``), every field checked with a one-line error naming it and its bounds."""
     g = top.table("geometry")
-    width = g.number("width_px", integer=True, minimum=16, maximum=100_000)
-    height = g.number("height_px", integer=True, minimum=16, maximum=100_000)
-    pitch = g.number("pixel_pitch_um", positive=True, maximum=100.0)
+    size = f"<= {MAX_SIDE_PX} px: the largest image sensors made are 14204 x 10652 px"
+    width = g.number("width_px", integer=True, minimum=16, maximum=MAX_SIDE_PX, reason=size)
+    height = g.number("height_px", integer=True, minimum=16, maximum=MAX_SIDE_PX, reason=size)
+    if width * height > MAX_PIXELS:
+        raise DataFileError(
+            f"{g.file}: geometry.height_px: expected width_px x height_px <= {MAX_PIXELS:.3g} pixels (above the "
+            f"largest image sensors made), got {width} x {height} = {width * height:.3g}"
+        )
+    pitch = g.number(
+        "pixel_pitch_um",
+        minimum=MIN_PIXEL_PITCH_UM,
+        maximum=100.0,
+        reason="the smallest pixels made are 0.56 um, the largest near 100 um",
+    )
     if g.has("focal_length_mm"):
         focal = g.number("focal_length_mm", positive=True, maximum=10_000.0)
+        if g.has("diagonal_fov_deg"):  # the published figure the focal length came from (checked, not used)
+            g.number("diagonal_fov_deg", positive=True, maximum=179.0)
     else:  # from the diagonal field of view of a rectilinear lens
         half_diag_mm = 0.5 * math.hypot(width, height) * pitch * 1e-3
         fov = g.number("diagonal_fov_deg", positive=True, maximum=179.0)

@@ -20,3 +20,14 @@ def mitsuba_variant():
     from scenes.mitsuba_variant import select_variant
 
     return select_variant("mono")
+
+
+@pytest.fixture(autouse=True)
+def _no_user_hardware():
+    """Every test starts with the built-in hardware only and leaves none behind (``--camera-file``
+    and ``add_hardware_file`` register the user's files in the process)."""
+    from scenes.hardware import clear_user_hardware
+
+    clear_user_hardware()
+    yield
+    clear_user_hardware()

@@ -34,6 +34,7 @@ from typer._click import exceptions as cli_errors  # typer's own (vendored) clic
 from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study, unknowns
 from studies.cli.common import console
 from studies.cli.out_folder import folder_command, release_out_dirs
+from studies.engine.runner import NoWorkersError
 
 COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
@@ -194,6 +195,9 @@ def main() -> None:
         code = 0  # bare "beacon-sim": the help is already printed
     except KeyboardInterrupt:
         code = EXIT_INTERRUPTED
+    except NoWorkersError as exc:  # a Dask cluster left without workers: one line, not a traceback
+        _fail(str(exc))
+        code = 1
     except ValueError as exc:  # UsageError, ScenarioError, DataFileError, other validation
         code = EXIT_INTERRUPTED if guard.interrupted else _fail(str(exc))
     except cli_errors.UsageError as exc:  # typer's parsing errors (NoSuchOption, BadParameter, ...)

@@ -2,9 +2,10 @@
 of your own), and the user's hardware files (``--camera-file`` / ``--beacon-file``).
 
 A hardware file option may stand anywhere on the command line and applies to every command:
-:func:`use_hardware_files` takes it out of the arguments, checks the file field by field
-(one-line errors naming the file and field) and registers its name
-(:mod:`scenes.hardware`). When the command takes a camera (``--camera`` / ``--cameras``) or a
+:func:`use_hardware_files` takes it out of the arguments, reads the file once with every file
+it names (:mod:`scenes.hardware`: the run and its workers use those contents, never the path),
+checks it field by field (one-line errors naming the file and field; a key nothing reads names
+the nearest valid key) and registers its name. When the command takes a camera (``--camera`` / ``--cameras``) or a
 beacon (``--beacon`` / ``--beacons``) and the command line does not name one, the file's
 hardware is used.
 """

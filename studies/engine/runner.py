@@ -18,6 +18,16 @@ a worker's peak memory) differ between an interrupted-and-resumed run and an uni
 one; they are left out of the returned rows and appended to ``<out>/machine.csv`` as each
 task finishes, so result tables depend on the tasks alone.
 
+The user's hardware files travel with the tasks as contents (:class:`scenes.hardware.HardwareSet`,
+read once when the command started): every batch carries them, each worker installs them before
+its tasks, and their digest is part of every key, so a file edited or removed during a run
+changes neither the results nor the key they are stored under, and a Dask worker on another
+machine needs no copy of the files.
+
+On a Dask cluster, a sweep whose scheduler has had no worker for :data:`NO_WORKER_TIMEOUT_S`
+fails with a one-line error (:class:`NoWorkersError`) instead of waiting for ever; the finished
+tasks are stored, so the same command resumes once workers are back.
+
 Interrupting (Ctrl-C, SIGINT) stops a local pool at once: pool workers die on SIGINT (the
 terminal sends it to the whole process group) and the parent terminates any that remain
 instead of waiting for the queued tasks; finished tasks are already stored, so running the
@@ -43,7 +53,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from scenes.hardware import user_hardware_digest
+from scenes.hardware import HardwareSet, install_hardware, user_hardware
 from scenes.render_cache import atomic_write_bytes, content_key
 
 TaskFunction = Callable[[dict], list[dict]]
@@ -75,9 +85,51 @@ def function_name(function: TaskFunction) -> str:
     return f"{function.__module__}:{function.__qualname__}"
 
 
-def run_one(function: TaskFunction, task: dict) -> list[dict]:
+NO_WORKER_TIMEOUT_S = 120.0
+"""How long a Dask sweep waits while its scheduler has no worker before it fails, s. A worker
+that dies is restarted by its nanny within seconds, and a job-queue cluster adds workers within
+a minute or so; two minutes with none means the cluster is gone or was never scaled up."""
+
+DASK_POLL_S = 0.25
+"""How often a Dask sweep with nothing finished looks again (and counts the workers), s."""
+
+
+class NoWorkersError(RuntimeError):
+    """A Dask sweep's scheduler has had no worker for longer than the timeout."""
+
+
+@dataclass
+class WorkerWatchdog:
+    """Fails a sweep whose cluster has had no worker for ``timeout_s``.
+
+    Call :meth:`observe` with the number of workers now connected whenever the sweep waits;
+    it raises :class:`NoWorkersError` once none has been connected for longer than
+    ``timeout_s`` (counted from the last time one was, or from the start).
+    """
+
+    timeout_s: float
+    where: str = "the Dask scheduler"
+    clock: Callable[[], float] = time.monotonic
+
+    def __post_init__(self) -> None:
+        self._last_seen = self.clock()
+
+    def observe(self, workers: int, unfinished: int = 0) -> None:
+        """Note ``workers`` connected now (``unfinished`` tasks still to run, for the message)."""
+        now = self.clock()
+        if workers > 0:
+            self._last_seen = now
+        elif now - self._last_seen > self.timeout_s:
+            raise NoWorkersError(
+                f"scheduler: no worker connected to {self.where} for {self.timeout_s:g} s with {unfinished} "
+                "task batches unfinished; the finished tasks are stored: start workers and run the same command "
+                "again to resume"
+            )
+
+
+def run_one(function: TaskFunction, task: dict, hardware: HardwareSet | None = None) -> list[dict]:
     """Worker entry point (top level, so process pools and Dask can pickle it)."""
-    return run_batch(function, [task])[0]
+    return run_batch(function, [task], hardware)[0]
 
 
 def _worker_start() -> None:
@@ -86,11 +138,17 @@ def _worker_start() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def run_batch(function: TaskFunction, tasks: list[dict]) -> list[list[dict]]:
-    """Worker entry point for a batch: each task's rows, in order."""
+def run_batch(function: TaskFunction, tasks: list[dict], hardware: HardwareSet | None = None) -> list[list[dict]]:
+    """Worker entry point for a batch: each task's rows, in order.
+
+    ``hardware``: the user's hardware files the tasks were keyed with, installed in this
+    process first (:func:`scenes.hardware.install_hardware`); None keeps the process's own.
+    """
     threads = os.environ.get("BEACON_SIM_THREADS")
     if threads:
         cv2.setNumThreads(max(1, int(threads)))  # share the cores with the other workers
+    if hardware is not None:
+        install_hardware(hardware)
     return [function(task) for task in tasks]
 
 
@@ -179,14 +237,15 @@ def open_in_place(path: Path) -> int:
     return fd
 
 
-def task_key(function: TaskFunction, task: dict, version: int) -> str:
+def task_key(function: TaskFunction, task: dict, version: int, hardware: HardwareSet | None = None) -> str:
     """Content key of a task.
 
-    With user hardware files (:mod:`scenes.hardware`) their contents are part of the key,
-    so a task is never answered from results of an earlier version of the user's file; with
-    none the key is as before.
+    With user hardware files (``hardware``, default this process's:
+    :func:`scenes.hardware.user_hardware`) their contents and those of every file they name
+    are part of the key, so a task is never answered from results of other contents of the
+    user's files; with none the key is as before.
     """
-    digest = user_hardware_digest()
+    digest = (user_hardware() if hardware is None else hardware).digest
     extra = (digest,) if digest else ()
     return content_key("task", function_name(function), version, task, *extra)
 
@@ -204,6 +263,7 @@ def run_tasks(
     max_batch: int = 32,
     threads_per_worker: int | None = None,
     isolated: bool = False,
+    no_worker_timeout_s: float = NO_WORKER_TIMEOUT_S,
 ) -> list[dict]:
     """Run ``tasks`` (skipping stored ones) and return all rows in task order, without
     :data:`MACHINE_COLUMNS` (logged to :data:`MACHINE_LOG` in ``out_dir`` instead).
@@ -235,12 +295,16 @@ def run_tasks(
         cores shared out among the workers.
     isolated
         Run in worker processes even with one worker (as a pool does; for timing).
+    no_worker_timeout_s
+        With ``scheduler``: fail (:class:`NoWorkersError`) once the cluster has had no worker
+        for this long, s.
     """
     if version is None:
         version = getattr(sys.modules[function.__module__], "FRAME_VERSION", 1)
     store = ResultStore(Path(out_dir) / "tasks")
     log = MachineLog(Path(out_dir) / MACHINE_LOG)
-    keys = [task_key(function, t, version) for t in tasks]
+    hardware = user_hardware()  # read once: the contents the keys cover are the contents sent
+    keys = [task_key(function, t, version, hardware) for t in tasks]
     pending: dict[str, dict] = {}
     for key, task in zip(keys, tasks, strict=True):
         if key not in pending and store.get(key) is None:
@@ -249,12 +313,14 @@ def run_tasks(
     with progress(description, len(set(keys)), len(set(keys)) - len(pending)) as advance:
         if pending:
             if scheduler:
-                _run_dask(scheduler, function, batches, store, advance, log)
+                watchdog = WorkerWatchdog(no_worker_timeout_s, f"the Dask scheduler at {scheduler}")
+                _run_dask(scheduler, function, batches, store, advance, log, hardware, watchdog)
             elif not isolated and ((workers or os.cpu_count() or 1) == 1 or len(batches) == 1):
                 for batch in batches:
-                    _store_batch(store, batch, run_batch(function, list(batch.values())), advance, log)
+                    _store_batch(store, batch, run_batch(function, list(batch.values()), hardware), advance, log)
             else:
-                _run_pool(workers or os.cpu_count() or 1, function, batches, store, advance, threads_per_worker, log)
+                n = workers or os.cpu_count() or 1
+                _run_pool(n, function, batches, store, advance, threads_per_worker, log, hardware)
     rows: list[dict] = []
     for key in keys:
         stored = store.get(key)
@@ -296,6 +362,7 @@ def _run_pool(
     advance,
     threads_per_worker: int | None = None,
     log: MachineLog | None = None,
+    hardware: HardwareSet | None = None,
 ) -> None:
     # spawn, not fork: Dr.Jit's LLVM backend keeps threads that must not be forked; each
     # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
@@ -303,7 +370,7 @@ def _run_pool(
     with worker_threads(n, threads_per_worker):
         pool = ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn"), initializer=_worker_start)
         try:
-            futures = {pool.submit(run_batch, function, list(batch.values())): batch for batch in batches}
+            futures = {pool.submit(run_batch, function, list(batch.values()), hardware): batch for batch in batches}
             for future in as_completed(futures):
                 _store_batch(store, futures[future], future.result(), advance, log)
         except (KeyboardInterrupt, SystemExit):
@@ -355,23 +422,43 @@ def _run_dask(
     store: ResultStore,
     advance,
     log: MachineLog | None = None,
+    hardware: HardwareSet | None = None,
+    watchdog: WorkerWatchdog | None = None,
 ) -> None:
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 
+    watchdog = watchdog or WorkerWatchdog(NO_WORKER_TIMEOUT_S, f"the Dask scheduler at {address}")
     with Client(address) as client:
         futures = {
             client.submit(
-                run_batch, function, list(batch.values()), key=f"beacon-sim-{next(iter(batch))}", pure=False
+                run_batch, function, list(batch.values()), hardware, key=f"beacon-sim-{next(iter(batch))}", pure=False
             ): batch
             for batch in batches
         }
         try:
-            for future in dask_completed(list(futures)):
-                _store_batch(store, futures[future], future.result(), advance, log)
-        except (KeyboardInterrupt, SystemExit):
+            waiting = dask_completed(list(futures))
+            while not waiting.is_empty():
+                ready = waiting.next_batch(block=False)
+                for future in ready:
+                    rows = _dask_result(future, lambda: watchdog.observe(len(client.nthreads()), waiting.count()))
+                    _store_batch(store, futures[future], rows, advance, log)
+                if not ready:  # nothing finished: is anyone still working on it?
+                    watchdog.observe(len(client.nthreads()), waiting.count())
+                    time.sleep(DASK_POLL_S)
+        except (KeyboardInterrupt, SystemExit, NoWorkersError):
             client.cancel(list(futures))  # the cluster stops this sweep's tasks; finished ones are stored
             raise
+
+
+def _dask_result(future, check: Callable[[], None]) -> list[list[dict]]:
+    """A finished Dask future's result; while it is unavailable (its result was lost with a
+    worker and waits to be computed again) ``check`` runs between tries (the watchdog)."""
+    while True:
+        try:
+            return future.result(timeout=DASK_POLL_S)
+        except TimeoutError:
+            check()
 
 
 def selftest_task(task: dict) -> list[dict]:

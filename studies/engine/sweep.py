@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from scenes.hardware import user_hardware
 from scenes.render_cache import atomic_write_bytes, content_key
 from studies.engine.frame import FRAME_VERSION, render_batch_key, simulate_frame
 from studies.engine.runner import MACHINE_COLUMNS, Progress, no_progress, run_tasks
@@ -78,14 +79,17 @@ def sweep_in_chunks(
     is made into tasks, run and reduced to a DataFrame with categorical text columns
     before the next one starts, so the parent holds one chunk's tasks and rows at a time
     (about 4 kB per row as dicts, about 0.5 kB as columns). A finished chunk's table is
-    stored under ``out/chunks`` keyed by the content of its tasks, so a re-run whose
+    stored under ``out/chunks`` keyed by the content of its tasks (and of the user's hardware
+    files, as each task's key), so a re-run whose
     results are all stored reads 1 file per chunk instead of one per frame. ``frames``
     runs a chunk's tasks (default :func:`run_frames`; the benchmark passes stand-ins).
     """
     parts = []
+    digest = user_hardware().digest  # the user's hardware files, as for each task's key
+    hardware = (digest,) if digest else ()
     for i, conditions in enumerate(chunks):
         tasks = frame_tasks(conditions, options, estimators=estimators)
-        path = Path(out) / "chunks" / f"{content_key('chunk', FRAME_VERSION, tasks)}.parquet"
+        path = Path(out) / "chunks" / f"{content_key('chunk', FRAME_VERSION, tasks, *hardware)}.parquet"
         if path.is_file():
             parts.append(_read_chunk(path))
             continue

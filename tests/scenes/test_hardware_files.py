@@ -5,8 +5,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,16 +12,10 @@ import pytest
 
 from camera_models.camera import camera_template, load_camera
 from scenes.beacon import beacon_design, beacon_names, beacon_template
-from scenes.hardware import ENV_VAR, add_hardware_file, hardware_file, user_hardware_digest
+from scenes.hardware import add_hardware_file, hardware_file, user_hardware_digest
 from scenes.view import camera_geometry, camera_names
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
-
-
-@pytest.fixture(autouse=True)
-def _no_user_files(monkeypatch):
-    """Every test starts with no user hardware and leaves none behind."""
-    monkeypatch.delenv(ENV_VAR, raising=False)
 
 
 def _same(a, b, path=""):
@@ -140,16 +132,19 @@ def test_bad_beacon_field_and_names(tmp_path):
         add_hardware_file("beacon", odd)
 
 
-def test_worker_processes_see_user_files_and_edits_change_the_digest(tmp_path):
-    """A spawned process resolves the same names (the registry travels in the environment)."""
+def test_a_file_is_read_once_and_a_new_command_reads_it_again(tmp_path):
+    """Registered contents stay as read (an edit changes nothing until the file is added again, as
+    the next command does); the digest follows the contents."""
     path = tmp_path / "cam.toml"
     path.write_text((EXAMPLES / "rpi-hq-6mm.toml").read_text())
     assert user_hardware_digest() == ""
     name = add_hardware_file("camera", path)
     before = user_hardware_digest()
-    code = f"from camera_models.camera import load_camera; print(load_camera({name!r}).geometry.width_px)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=os.environ, check=True)
-    assert out.stdout.strip() == "4056"
     path.write_text(path.read_text().replace("value = 4056,", "value = 4000,"))
+    assert camera_geometry(name).width_px == 4056 and user_hardware_digest() == before
+    path.unlink()
+    assert load_camera(name).geometry.width_px == 4056  # the file is no longer needed
+    path.write_text((EXAMPLES / "rpi-hq-6mm.toml").read_text().replace("value = 4056,", "value = 4000,"))
+    assert add_hardware_file("camera", path) == name
     assert user_hardware_digest() not in ("", before)
-    assert camera_geometry(name).width_px == 4000  # the loader follows the edit, no stale cache
+    assert camera_geometry(name).width_px == 4000

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from scenes.hardware import ENV_VAR
 from studies.cli.app import click_command
 from studies.cli.hardware import use_hardware_files
 from tests.studies.test_cli_edges import assert_one_line_error, invoke, work  # noqa: F401  (fixture)
@@ -14,11 +13,6 @@ from tests.studies.test_cli_edges import assert_one_line_error, invoke, work  # 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CAMERA = str(EXAMPLES / "rpi-hq-6mm.toml")
 BEACON = str(EXAMPLES / "v2-arms-100mm.toml")
-
-
-@pytest.fixture(autouse=True)
-def _no_user_files(monkeypatch):
-    monkeypatch.delenv(ENV_VAR, raising=False)
 
 
 def _use(args: list[str]) -> list[str]:
@@ -65,7 +59,10 @@ def test_a_bad_field_names_file_and_field(work, tmp_path):  # noqa: F811
     bad.write_text(Path(CAMERA).read_text().replace("value = 1.55,", "value = -1.5,"))
     code, _out, err = invoke(["capture", "--camera-file", str(bad), "--out", "o"])
     line = assert_one_line_error(code, err)
-    assert line.endswith("camera file bad.toml: geometry.pixel_pitch_um: expected a number > 0 and <= 100, got -1.5")
+    assert line.endswith(
+        "camera file bad.toml: geometry.pixel_pitch_um: expected a number >= 0.5 and <= 100 (the smallest pixels "
+        "made are 0.56 um, the largest near 100 um), got -1.5"
+    )
     assert not (work / "o").exists()
 
 

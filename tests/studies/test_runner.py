@@ -75,15 +75,15 @@ def test_batched_tasks_give_the_same_table_and_are_stored_one_by_one(tmp_path):
     assert all(store.get(task_key(FN, t, 1)) is not None for t in tasks)
 
 
-def test_task_keys_follow_the_users_hardware_files(tmp_path, monkeypatch):
-    """Built-in hardware only: keys as always; a user file, or an edit of it, gives new keys."""
+def test_task_keys_follow_the_users_hardware_files(tmp_path):
+    """Built-in hardware only: keys as always; a user file, or an edit of it (read again by the
+    next command), gives new keys."""
     from pathlib import Path
 
-    from scenes.hardware import ENV_VAR, add_hardware_file
+    from scenes.hardware import add_hardware_file
     from scenes.render_cache import content_key
     from studies.engine.runner import function_name
 
-    monkeypatch.delenv(ENV_VAR, raising=False)
     task = {"seed": 1}
     plain = task_key(selftest_task, task, 1)
     assert plain == content_key("task", function_name(selftest_task), 1, task)
@@ -93,5 +93,6 @@ def test_task_keys_follow_the_users_hardware_files(tmp_path, monkeypatch):
     add_hardware_file("beacon", mine)
     with_file = task_key(selftest_task, task, 1)
     mine.write_text(example.read_text().replace("value = 100.0", "value = 90.0"))
+    add_hardware_file("beacon", mine)
     edited = task_key(selftest_task, task, 1)
     assert len({plain, with_file, edited}) == 3
