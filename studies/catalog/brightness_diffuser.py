@@ -15,7 +15,6 @@ costs no renders.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ import pandas as pd
 from scenes.beacon import beacon_design
 from scenes.led import led_for_side
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
 from studies.engine.scoring import detection_success
@@ -73,7 +73,7 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict
     table = configuration_table(frame)
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
     _report(Path(out), options, table, summary)
-    atomic_write_bytes(Path(out) / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 

@@ -32,6 +32,7 @@ from scenes.render_cache import atomic_write_bytes
 from studies.catalog import brightness_diffuser, range_limit, webcam_vs_dslr
 from studies.engine.report import FIGURE_DPI, Provenance, Report, page_context, provenance
 from studies.engine.sequential import design_evidence
+from studies.engine.strict_json import strict_json
 
 STUDY_TITLES = {
     range_limit.NAME: "how far, versus yaw (working range per camera)",
@@ -791,15 +792,3 @@ def _answer_table(records: list[dict], labels: Mapping[str, str]) -> str:
         rows.append(f"<tr>{''.join(cells)}</tr>")
     caption = "<p><b>Per camera (best tracker): each column from the study its header names</b></p>"
     return f"{caption}<table class='answers'><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>"
-
-
-def strict_json(value):
-    """``value`` with every non-finite float (NaN, ±inf: "not measured", "open above") as None,
-    so ``json.dumps(..., allow_nan=False)`` writes standard JSON (RFC 8259 has no NaN)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: strict_json(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [strict_json(v) for v in value]
-    return value

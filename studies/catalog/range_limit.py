@@ -14,7 +14,6 @@ target or the budget is spent, and every record says how many frames decided it.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -22,12 +21,14 @@ import numpy as np
 import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.max_range import (
     estimate_max_range,
     far_interval_text,
     far_limit_text,
     near_failures_text,
     working_range_text,
+    works_best_key,
 )
 from studies.engine.report import Report
 from studies.engine.sequential import SequentialDesign, decision_text, design_evidence, run_design
@@ -124,7 +125,7 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design:
     """
     summary = analyse(frame, design)
     _report(Path(out), options, frame, summary)
-    atomic_write_bytes(Path(out) / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 
@@ -186,15 +187,17 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
 
 def lead_lines(summary: dict) -> list[str]:
     """One sentence per camera: its working range at the smallest and largest yaw for the
-    beacon, side and drive that reach farthest (best tracker), and what ends it."""
+    beacon, side and drive that work best (best tracker; farthest limits on average, then most
+    frames correct: :func:`studies.engine.max_range.works_best_key`), and what ends it."""
     table = pd.DataFrame(summary["max_range"])
     lines = []
     if table.empty:
         return ["No frames."]
     for cam, g in table.groupby("camera", sort=True):
         config = ["beacon", "side", "led_current_mA"]
-        reach = g.groupby(config).max_range_m.mean()
-        beacon, side, current = reach.index[int(np.argmax(reach.to_numpy()))]
+        # the setting that works best: farthest limits on average, then most frames correct
+        score = {k: np.mean([works_best_key(r) for r in c.to_dict("records")], axis=0) for k, c in g.groupby(config)}
+        beacon, side, current = max(score, key=lambda k: tuple(score[k]))
         sel = g[(g.beacon == beacon) & (g.side == side) & (g.led_current_mA == current)].sort_values("yaw_deg")
         parts = []
         for rec in (sel.iloc[0], sel.iloc[-1]) if len(sel) > 1 else (sel.iloc[0],):

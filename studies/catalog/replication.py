@@ -14,7 +14,6 @@ drive, as heat maps and a table, and the detection probability of every configur
 from __future__ import annotations
 
 import itertools
-import json
 import os
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -24,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.max_range import COLUMNS, estimate_max_range
 from studies.engine.report import Report
 from studies.engine.sweep import Execution, sweep_in_chunks
@@ -91,7 +91,7 @@ def run(out: Path, options: StudyOptions, execution: Execution = Execution()) ->
     configurations = configuration_table(frame)
     atomic_write_bytes(out / "configurations.csv", configurations.to_csv(index=False, float_format="%.6g").encode())
     _report(out, options, summary)
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 

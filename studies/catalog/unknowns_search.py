@@ -39,7 +39,6 @@ each point is scored on every condition and side with ``seeds`` noise seeds. Out
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -48,6 +47,7 @@ import pandas as pd
 
 from scenes.led import SIDE_COLOURS
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.scoring import detection_success
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tasks import StudyOptions, frame_tasks
@@ -155,7 +155,7 @@ def run(out: Path, samples: int = 64, seeds: int = 1, seed: int = 0, execution: 
     Path(out).mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(Path(out) / "samples.csv", table.to_csv(index=False, float_format="%.6g").encode())
     summary = summarise(table, space, samples, seeds, seed)
-    atomic_write_bytes(Path(out) / "summary.json", json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 

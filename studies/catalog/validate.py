@@ -28,7 +28,6 @@ them); the report marks the study's headline conclusions agree/disagree from tho
 from __future__ import annotations
 
 import itertools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,7 @@ from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
 from studies.catalog.unknowns_search import WEBCAMS, apply_point, calibrated_set
+from studies.engine import strict_json
 from studies.engine.colour_reach import HIGHLIGHTS, LEVELS, reach
 from studies.engine.frame import capture_frame
 from studies.engine.metrics import wilson_interval
@@ -178,7 +178,7 @@ def run(
     preliminary = tasks_for({"preliminary"}, None)
     rows = run_frames(preliminary, out, execution, description=f"{NAME} preliminary")
     derived = derive_thresholds(preliminary)
-    atomic_write_bytes(out / "derived_thresholds.json", json.dumps(derived, indent=1).encode())
+    atomic_write_bytes(out / "derived_thresholds.json", strict_json.dumps(derived, indent=1).encode())
     later = tasks_for({"range", "primary", "weights"}, {"study": None, "derived": derived})
     rows += run_frames(later, out, execution, description=f"{NAME} range, primary, weights")
     frame = write_tables(out, rows)
@@ -199,7 +199,7 @@ def run(
     )
     _report(out, table, verdicts, derived, flux, which)
     summary = {"study": NAME, "calibrated_set": which, "conclusions": verdicts, "derived_thresholds": derived}
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return table.to_dict("records")
 
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import io
 import itertools
-import json
 import math
 from pathlib import Path
 
@@ -28,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.frame import target_crop_png
 from studies.engine.max_range import (
     estimate_max_range,
@@ -35,6 +35,7 @@ from studies.engine.max_range import (
     far_limit_text,
     near_failures_text,
     working_range_text,
+    works_best_key,
 )
 from studies.engine.metrics import bayes_error, confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.engine.report import Report
@@ -121,7 +122,7 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design:
     summary = analyse(frame, design)
     mosaic = (out / "mosaic.png").read_bytes() if (out / "mosaic.png").is_file() else None
     _report(out, options, frame, summary, mosaic)
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2, allow_nan=True).encode())
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 
@@ -132,10 +133,12 @@ def analyse(frame, design: dict | None = None) -> dict:
       (best estimator; :class:`studies.engine.max_range.MaxRange` fields and their wording);
     * ``colour_separability``: per camera and drive, the sides' pairwise separability and how
       many of the best tracker's detections named the right side (``right_colour`` of
-      ``detections``);
-    * ``ranking``: cameras by their best drive's far limit (best tracker, to 0.1 m; ``at_least``:
-      no fall-off up to the farthest range tried, printed "≥"), then by that drive's colour
-      separability; ``tied_on_range`` names the cameras whose far limits are equal;
+      ``detections``) and which sides the others were named (``confused``, :func:`confusions`);
+    * ``ranking``: cameras by the far limit of the drive that works best for them (best tracker;
+      :func:`studies.engine.max_range.works_best_key`: far limit to 0.1 m, then the fraction of
+      frames correct; ``at_least``: no fall-off up to the farthest range tried, printed "≥"),
+      then by that fraction and that drive's colour separability; ``tied_on_range`` names the
+      cameras whose far limits are equal;
     * ``yaws_deg``: the yaws swept (every record pools them);
     * ``design`` (with a sequential ``design``, its summary): then each ``max_range`` record
       says how many frames decided it (``decision``, ``far_decided``, ``near_decided``,
@@ -174,6 +177,7 @@ def analyse(frame, design: dict | None = None) -> dict:
                 "frames": len(g),
                 "detections": len(detected),
                 "right_colour": int(detected.side_correct.astype(bool).sum()),
+                "confused": confusions(detected),
             }
         )
     best: dict[str, dict] = {}
@@ -188,16 +192,14 @@ def analyse(frame, design: dict | None = None) -> dict:
             ),
             None,
         )
-        # ranges compared to 0.1 m: finer differences are the pose jitter of the farthest frames
-        cand = {
-            "reach": round(rec["max_range_m"], 1),
-            "sep": sep if sep is not None and not math.isnan(sep) else 0.0,
-            "rec": rec,
-        }
+        # the drive that works best: the farthest limit, then the most frames correct, then separability
+        reach, correct = works_best_key(rec)
+        cand = {"reach": reach, "correct": correct, "sep": sep if sep is not None and not math.isnan(sep) else 0.0}
+        cand["rec"] = rec
         old = best.get(rec["camera"])
-        if old is None or (cand["reach"], cand["sep"]) > (old["reach"], old["sep"]):
+        if old is None or (reach, correct, cand["sep"]) > (old["reach"], old["correct"], old["sep"]):
             best[rec["camera"]] = cand
-    ranking = sorted(best, key=lambda c: (-best[c]["reach"], -best[c]["sep"]))
+    ranking = sorted(best, key=lambda c: (-best[c]["reach"], -best[c]["correct"], -best[c]["sep"]))
     for i, c in enumerate(ranking):
         rec = best[c]["rec"]
         tied = [o for o in ranking if o != c and best[o]["reach"] == best[c]["reach"]]
@@ -211,6 +213,7 @@ def analyse(frame, design: dict | None = None) -> dict:
                 "far_interval": rec["far_interval"],
                 "working_range": rec["working_range"],
                 "at_led_current_mA": rec["led_current_mA"],
+                "correct": f"{rec['successes']} of {rec['frames']}",
                 "environment": rec["environment"],
                 "beacon": rec["beacon"],
                 "min_colour_mahalanobis": best[c]["sep"],
@@ -228,9 +231,10 @@ def colour_separability(frames) -> dict:
     Each frame contributes its five markers' chromaticities (r, g); the distance
     between two sides is the Mahalanobis distance of their chromaticity samples under
     the pooled covariance (inf: they do not overlap in any direction, a perfect
-    separation), with the Bayes error Φ(−d/2) of two Gaussian classes that far apart;
-    ΔE2000 compares their mean sRGB colours. ``min_mahalanobis`` is the closest pair's
-    distance (None without two sides with samples).
+    separation; ``no_overlap`` says so where standard JSON writes the inf as null), with the
+    Bayes error Φ(−d/2) of two Gaussian classes that far apart; ΔE2000 compares their mean
+    sRGB colours. ``min_mahalanobis`` is the closest pair's distance (None without two sides
+    with samples; ``no_overlap`` at the record: every pair is perfectly separated).
     """
     samples, means = {}, {}
     for side, g in frames.groupby("side"):
@@ -251,6 +255,7 @@ def colour_separability(frames) -> dict:
             {
                 "pair": f"{a}-{b}",
                 "mahalanobis": d,
+                "no_overlap": d == math.inf,
                 "bayes_error": bayes_error(d) if not math.isnan(d) else math.nan,
                 "delta_e_2000": delta_e_2000(means[a], means[b]),
             }
@@ -259,20 +264,49 @@ def colour_separability(frames) -> dict:
     return {
         "pairs": pairs,
         "min_mahalanobis": float(min(m)) if m else None,
+        "no_overlap": bool(m) and min(m) == math.inf,
         "mean_srgb": {k: v.tolist() for k, v in means.items()},
     }
 
 
+def confusions(detected) -> list[dict]:
+    """The detections that named a wrong side, counted per true and named side:
+    ``[{"true": "red", "named": "yellow", "frames": 3}, ...]``, most frames first."""
+    wrong = detected[~detected.side_correct.astype(bool)]
+    counts = wrong.groupby([wrong.side, wrong.side_detected.astype(str)]).size()
+    rows = [{"true": t, "named": n, "frames": int(k)} for (t, n), k in counts.items()]
+    return sorted(rows, key=lambda r: (-r["frames"], r["true"], r["named"]))
+
+
 def separability_text(sep: dict) -> str:
-    """A camera's colour separability in words: "perfect (no overlap)" or "d = 9.9
-    (red-green; Bayes error 4e-07)", from a ``colour_separability`` record."""
-    pairs = [p for p in sep.get("pairs", []) if not math.isnan(p["mahalanobis"])]
+    """A camera's colour separability in words, over every pair of the sides that were run, with
+    the confusion observed beside it: "closest pair green-red, d = 9.03 (Gaussian-model error
+    3.2e-06), of 1 pair among the sides run (green, red); observed: 13 of 16 detections the right
+    colour, 3 red named yellow (a side not run)", from a ``colour_separability`` record."""
+    pairs = [
+        {**p, "mahalanobis": math.inf if p.get("no_overlap") else p["mahalanobis"]} for p in sep.get("pairs", [])
+    ]  # a summary read back from standard JSON has null for inf (``no_overlap``) and for NaN
+    pairs = [p for p in pairs if p["mahalanobis"] is not None and not math.isnan(p["mahalanobis"])]
     if not pairs:
         return "not measured (fewer than two sides seen)"
+    run = sorted({side for p in pairs for side in p["pair"].split("-")})
+    among = f"of {len(pairs)} pair{'s' if len(pairs) > 1 else ''} among the sides run ({', '.join(run)})"
     worst = min(pairs, key=lambda p: p["mahalanobis"])
     if math.isinf(worst["mahalanobis"]):
-        return f"perfect: no overlap between any two sides ({len(pairs)} pair{'s' if len(pairs) > 1 else ''})"
-    return f"d = {worst['mahalanobis']:.3g} ({worst['pair']}; Bayes error {small_probability(worst['bayes_error'])})"
+        text = f"no overlap in any {among.removeprefix('of ')}"
+    else:
+        text = (
+            f"closest pair {worst['pair']}, d = {worst['mahalanobis']:.3g} "
+            f"(Gaussian-model error {small_probability(worst['bayes_error'])}), {among}"
+        )
+    if "detections" not in sep:
+        return text
+    observed = f"{sep['right_colour']} of {sep['detections']} detections the right colour"
+    named = [
+        f"{c['frames']} {c['true']} named {c['named']}" + ("" if c["named"] in run else " (a side not run)")
+        for c in sep.get("confused", [])
+    ]
+    return f"{text}; observed: {observed}" + (f", {', '.join(named)}" if named else "")
 
 
 def small_probability(p: float) -> str:
@@ -376,11 +410,10 @@ def lead_lines(summary: dict) -> list[str]:
     for r in ranking:
         sep = seps.get((r["camera"], r["at_led_current_mA"]), {})
         colour = separability_text(sep) if sep else "not measured"
-        right = f"; {sep['right_colour']} of {sep['detections']} detections the right colour" if sep else ""
         lines.append(
             f"{r['rank']}. {r['camera']} at {r['at_led_current_mA']:g} mA ({r['beacon'].upper()}, {r['environment']}): "
-            f"works {r['working_range']} (far limit 95 % interval {r['far_interval']}); colour separability "
-            f"{colour}{right}."
+            f"works {r['working_range']} (far limit 95 % interval {r['far_interval']}; {r['correct']} frames "
+            f"correct); colour separability {colour}."
         )
     return lines
 
@@ -428,15 +461,18 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
                     "far_limit",
                     "far_interval",
                     "at_led_current_mA",
+                    "correct",
                     "min_colour_mahalanobis",
                     "tied_on_range",
                 ]
             ],
-            "Cameras by far limit (best tracker, their best drive), then colour separability",
+            "Cameras by far limit (best tracker, at the drive that works best for each: farthest limit, then most "
+            "frames correct), then colour separability",
             labels={
                 "far_limit": "far limit",
                 "far_interval": "far limit, 95 % interval",
                 "at_led_current_mA": "at LED drive, mA",
+                "correct": "frames correct at that drive",
                 "min_colour_mahalanobis": "colour separability (closest pair, Mahalanobis d)",
                 "tied_on_range": "tied on range with",
             },
@@ -469,8 +505,9 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
         {
             "camera": s["camera"],
             "led_current_mA": s["led_current_mA"],
-            **p,
+            **{k: v for k, v in p.items() if k != "no_overlap"},
             "right_colour": f"{s['right_colour']} of {s['detections']}",
+            "confused": ", ".join(f"{c['frames']} {c['true']} as {c['named']}" for c in s.get("confused", [])) or "–",
         }
         for s in summary["colour_separability"]
         for p in s["pairs"]
@@ -478,15 +515,17 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     if rows:
         rep.table(
             pd.DataFrame(rows),
-            "Pairwise separability of the sides' colours per camera and LED drive (marker chromaticities, best "
-            "tracker's frames); inf: the samples do not overlap (perfect separation)",
+            "Pairwise separability of the sides' colours per camera and LED drive, over every pair of the sides run "
+            "(marker chromaticities, best tracker's frames; inf: the samples do not overlap), with the confusion the "
+            "best tracker's detections showed beside it (a side not run can still be named)",
             labels={
                 "led_current_mA": "LED drive, mA",
                 "pair": "sides",
                 "mahalanobis": "Mahalanobis d",
-                "bayes_error": "Bayes error Φ(−d/2)",
+                "bayes_error": "Gaussian-model error Φ(−d/2)",
                 "delta_e_2000": "ΔE2000 of mean colours",
-                "right_colour": "detections of the right colour",
+                "right_colour": "observed: detections of the right colour",
+                "confused": "observed: named wrongly",
             },
             formats={
                 "led_current_mA": "{:g}",

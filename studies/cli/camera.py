@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from typing import Annotated
 
@@ -16,13 +15,18 @@ from camera_models.capture import marker_core_saturation
 from camera_models.emva import EmvaSetup, green_qe, write_dataset
 from camera_models.exposure import manual_exposure
 from camera_models.optics import check_f_number
+from pipeline.angles import Intrinsics
+from pipeline.detect import detect as run_detect
 from scenes.background import render_background
 from scenes.render import render as render_scenario
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import Scenario
+from scenes.view import camera_geometry
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_render_cache, console
 from studies.cli.out_folder import prepare_out_dir
+from studies.engine import strict_json
+from studies.engine.scoring import CLIPPED_CORES
 
 
 def _gain(cam, iso: float | None, gain: int | None) -> float:
@@ -36,6 +40,45 @@ def _gain(cam, iso: float | None, gain: int | None) -> float:
     if iso is not None:
         raise UsageError(f"iso: expected no --iso ({cam.name} has no ISO setting: use --gain), got {iso:g}")
     return s.analog_gain(gain_code=s.gain_code_min if gain is None else gain)
+
+
+WORKING_SETTING = "--led-current-ma 2 --foam --paper-sheets 3"
+"""The studies' LED setting (brightness-diffuser's window: 2 mA behind foam + 3 white sheets),
+named by :func:`capture_warnings`."""
+
+
+def capture_warnings(markers: list[dict], side: str, detected_side: str | None) -> list[str]:
+    """One line each for what makes a capture useless for telling the side: marker cores
+    mostly clipped (> :data:`studies.engine.scoring.CLIPPED_CORES` of a core's pixels at the
+    clip level, so the camera saves them white or off-colour), and a detector (best tracker)
+    that names another side or none.
+
+    Parameters
+    ----------
+    markers : :func:`camera_models.capture.marker_core_saturation` of the capture.
+    side : the side that faces the camera.
+    detected_side : the side the detector named (None: no five markers found).
+
+    Returns
+    -------
+    Warning lines ([] when the capture is usable).
+    """
+    lines = []
+    fractions = [m["saturated_fraction"] for m in markers if m["core_pixels"]]
+    clipped = [f for f in fractions if f > CLIPPED_CORES]
+    if clipped:
+        lines.append(
+            f"warning: {len(clipped)} of {len(markers)} marker cores clipped (mean {100 * np.mean(fractions):.0f} % "
+            f"of core pixels at the clip level): their colour is lost; dim the LED or diffuse it (the studies use "
+            f"{WORKING_SETTING})"
+        )
+    if detected_side != side:
+        named = f"names the side {detected_side}" if detected_side else "finds no five markers"
+        lines.append(
+            f"warning: the detector (best tracker) {named}, not {side}: this capture does not show the side's colour"
+            + ("" if clipped else f" (the studies use {WORKING_SETTING})")
+        )
+    return lines
 
 
 def emva1288(
@@ -59,7 +102,7 @@ def emva1288(
     prepare_out_dir(out)
     truth = write_dataset(cam, analog_gain, out, seed=seed, setup=EmvaSetup(wavelength_nm=wavelength_nm))
     truth.update(iso=iso if cam.sensor.uses_iso else None, gain_code=gain)
-    print(json.dumps(truth, indent=2))
+    print(strict_json.dumps(truth, indent=2))
     console.print(f"wrote {out}/descriptor.txt and images/ (process with the emva1288 package)")
 
 
@@ -111,6 +154,9 @@ def capture(
     _ok, preview = cv2.imencode(".png", np.ascontiguousarray(cap.image.rgb8[::step, ::step, ::-1]))
     atomic_write_bytes(out / "preview.png", preview.tobytes())
     markers = marker_core_saturation(cap, cam, scenario)
+    bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    seen = run_detect(bgr, Intrinsics.from_geometry(camera_geometry(camera)), beacon=scenario.beacon)
+    warnings = capture_warnings(markers, scenario.side, seen.side if seen.markers else None)
     meta = {
         "scenario": scenario.to_dict(),
         "camera": camera,
@@ -120,6 +166,8 @@ def capture(
         "K_DN_per_e": cam.sensor.K_DN_per_e(cap.exposure.analog_gain),
         "saturated_fraction_frame": cap.saturated_fraction,
         "markers_ground_truth_px": markers,
+        "detected_side": seen.side if seen.markers else None,
+        "warnings": warnings,
         "raw": {
             "cfa": cam.sensor.cfa,
             "black_level_DN": cam.sensor.black_level_DN,
@@ -133,11 +181,13 @@ def capture(
         "seconds": round(time.perf_counter() - t0, 3),
         "files": {"image": "image.jpg", "raw": "raw.png", "preview": "preview.png"},
     }
-    atomic_write_bytes(out / "capture.json", json.dumps(meta, indent=2).encode())
+    atomic_write_bytes(out / "capture.json", strict_json.dumps(meta, indent=2).encode())
     console.print(
         f"wrote {out}/ (image.jpg, raw.png, preview.png, capture.json): exposure {cap.exposure.exposure_s:.4g} s, "
         f"gain x{cap.exposure.analog_gain:.3g}, {100 * cap.saturated_fraction:.3f} % of pixels clipped"
     )
+    for line in warnings:
+        console.print(line, style="yellow", soft_wrap=True)
 
 
 COMMANDS = {"capture": capture, "emva1288": emva1288}

@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Annotated
 
 import typer
@@ -16,6 +15,7 @@ from scenes.near_field import NearFieldSettings
 from scenes.scenario import Scenario
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_finite, console
+from studies.engine import strict_json
 from studies.experiments import estimator_montecarlo, lens_calibration, two_stage_check
 
 
@@ -41,7 +41,7 @@ def two_stage_check_command(
     view = two_stage_check.MarkerView(range_m=range_m, view_deg=view_deg)
     with console.status("rendering the marker both ways ..."):
         result = two_stage_check.compare(view, brute_spp, brute_passes, NearFieldSettings(spp=near_field_spp))
-    print(json.dumps(result.to_dict(), indent=2))
+    print(strict_json.dumps(result.to_dict(), indent=2))
 
 
 def lens_calibration_command(
@@ -61,7 +61,7 @@ def lens_calibration_command(
     with console.status(f"calibrating {camera} from rendered boards ..."):
         result = lens_calibration.calibrate(lens_calibration.scaled_camera(camera, scale), model)
     out = {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in result.__dict__.items()}
-    print(json.dumps(out, indent=2))
+    print(strict_json.dumps(out, indent=2))
 
 
 def estimator_montecarlo_command(
@@ -80,7 +80,7 @@ def estimator_montecarlo_command(
         raise UsageError(f"seed: expected an integer >= 0, got {seed}")
     Scenario(camera=camera, range_m=range_m, yaw_deg=yaw_deg)  # validates camera, range and yaw
     result = estimator_montecarlo.pose_error_trials(camera, range_m, yaw_deg, sigma_px, trials, seed)
-    print(json.dumps(result, indent=2))
+    print(strict_json.dumps(result, indent=2))
 
 
 COMMANDS = {

@@ -37,6 +37,7 @@ from studies.cli.common import (
 )
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine import colour_reach as reach
+from studies.engine import strict_json
 from studies.experiments import bench as b
 from studies.experiments import crop_vs_full as cvf
 from studies.experiments import diffuser_mosaic as mosaic
@@ -149,7 +150,7 @@ def diffuser_mosaic(out: opt.Out) -> None:
     prepare_out_dir(out)
     with console.status("rendering the diffuser mosaic ..."):
         fluxes = mosaic.diffuser_mosaic(out / "diffuser_mosaic.png")
-    atomic_write_bytes(out / "diffuser_mosaic.json", json.dumps(fluxes, indent=2).encode())
+    atomic_write_bytes(out / "diffuser_mosaic.json", strict_json.dumps(fluxes, indent=2).encode())
     console.print(f"wrote {out}/diffuser_mosaic.png and diffuser_mosaic.json")
 
 
@@ -181,7 +182,7 @@ def colour_reach(
             "exposure_range": [float(ok.own_low.min()), float(ok.own_high.max())] if len(ok) else None,
         }
     atomic_write_bytes(out / "reach.csv", table.to_csv(index=False, float_format="%.4g").encode())
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     t = Table("camera", "side", "own box reached", "with")
     for cam, sides in summary.items():
         for side, v in sides.items():
@@ -232,7 +233,7 @@ def bench(
         prepare_out_dir(out)
         summary = b.grid_sample(out, grid_sample, seed, run)
         if json_out:
-            print(json.dumps(summary, indent=2))
+            print(strict_json.dumps(summary, indent=2))
             return
         print_table(
             f"replication grid sample ({active_variant().variant}, {os.cpu_count()} CPUs, {workers} workers)",
@@ -254,7 +255,7 @@ def bench(
 
     if grid_tables:
         with console.status("bench: replication tables at full size ..."):
-            print(json.dumps(b.replication_tables(), indent=2))
+            print(strict_json.dumps(b.replication_tables(), indent=2))
         return
 
     steps = [
@@ -303,7 +304,7 @@ def bench(
         "details": details,
     }
     if json_out:
-        print(json.dumps(result, indent=2))
+        print(strict_json.dumps(result, indent=2))
         return
     t = Table(title=f"beacon-sim bench ({result['variant']}, {os.cpu_count()} CPUs)")
     for col in ("measurement", "result", "goal"):
@@ -478,7 +479,7 @@ def tracker_pruning(
     prepare_out_dir(out)
     with console.status("comparing the pruned and the full search ..."):
         result = pruning.run(max_frames=max_frames, repeats=repeats)
-    atomic_write_bytes(out / "tracker_pruning.json", json.dumps(result, indent=1, allow_nan=True).encode())
+    atomic_write_bytes(out / "tracker_pruning.json", strict_json.dumps(result, indent=1).encode())
     console.print(
         f"{result['identical']} of {result['frames']} frames identical; tracker median "
         f"{result['time_full_ms']['median']:.1f} -> {result['time_pruned_ms']['median']:.1f} ms "

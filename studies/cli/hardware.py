@@ -12,7 +12,6 @@ hardware is used.
 
 from __future__ import annotations
 
-import json
 from typing import Annotated
 
 import typer
@@ -23,6 +22,7 @@ from scenes.hardware import add_hardware_file, is_builtin
 from scenes.view import camera_names
 from studies.cli import options as opt
 from studies.cli.common import UsageError, print_table
+from studies.engine import strict_json
 
 HARDWARE_FILE_OPTIONS = {"--camera-file": "camera", "--beacon-file": "beacon"}
 """The hardware-file options and the kind of hardware each adds."""
@@ -116,7 +116,7 @@ def beacons(
             }
         )
     if json_out:
-        print(json.dumps(rows, indent=2))
+        print(strict_json.dumps(rows, indent=2))
         return
     print_table(
         "Beacon designs (target frame: x toward viewer, y viewer's left, z down; mm)",
@@ -180,7 +180,7 @@ def cameras(
         return
     rows = camera_rows()
     if json_out:
-        print(json.dumps(rows, indent=2))
+        print(strict_json.dumps(rows, indent=2))
         return
     print_table(
         "Cameras",

@@ -11,7 +11,6 @@ frame. Every option is checked before the image is read, and nothing is written.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 from pathlib import Path
@@ -32,6 +31,7 @@ from scenes.beacon import beacon_design
 from scenes.view import camera_geometry
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console
+from studies.engine import strict_json
 
 RING_CAMERAS = 6
 """Cameras on the study's ring (numbered 0..5)."""
@@ -220,7 +220,7 @@ def detect(
     if tracker == "thesis":
         out["notes"].append(REAL_PHOTO_FALSE_POSITIVES.note("thesis"))
     if json_out:
-        print(json.dumps(out, indent=2))
+        print(strict_json.dumps(out, indent=2))
         return
     _print_detection(out)
 

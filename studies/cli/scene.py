@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Callable
@@ -21,6 +20,7 @@ from scenes.view import project
 from studies.cli import options as opt
 from studies.cli.common import check_render_cache, console
 from studies.cli.out_folder import prepare_out_dir
+from studies.engine import strict_json
 
 
 @opt.scenario_command
@@ -74,7 +74,7 @@ def write_render(out: Path, scenario, cache, cube: bool = False) -> dict:
     for c in meta["components"]:
         if c["name"].startswith("led:"):
             c["led_current_mA"] = side_current_mA(scenario, c["name"][4:])
-    atomic_write_bytes(out / "render.json", json.dumps(meta, indent=2).encode())
+    atomic_write_bytes(out / "render.json", strict_json.dumps(meta, indent=2).encode())
     console.print(
         f"wrote {out}/ ({', '.join(files.values())}, render.json) "
         f"in {elapsed:.1f} s{' [cache]' if radiance.from_cache else ''}"

@@ -3,10 +3,9 @@
 
 from __future__ import annotations
 
-import json
-
 from studies.cli import options as opt
 from studies.cli.common import print_table
+from studies.engine import strict_json
 from studies.engine.unknowns import load_unknowns, settable
 
 
@@ -37,7 +36,7 @@ def unknowns(json_out: opt.Json = False) -> None:
     """List the unknowns: what the source study did not give, its range and why (any run can fix or sample them)."""
     rows = unknown_rows()
     if json_out:
-        print(json.dumps(rows, indent=2, ensure_ascii=False))
+        print(strict_json.dumps(rows, indent=2, ensure_ascii=False))
         return
     print_table(
         "Unknowns (studies/data/unknowns.toml; per task: a frame task can set it, else only its nominal)",

@@ -117,8 +117,14 @@ class MaxRange:
     farthest_successes: int = 0
 
     def to_dict(self) -> dict:
-        """JSON-able form."""
-        return dict(self.__dict__)
+        """JSON-able form, with ``high_open`` / ``near_high_open`` saying that ``high_m`` /
+        ``near_high_m`` is +inf (the interval is open above), so the record keeps its meaning
+        when written as standard JSON, which has no infinity (:mod:`studies.engine.strict_json`)."""
+        return {
+            **self.__dict__,
+            "high_open": self.high_m == math.inf,
+            "near_high_open": self.near_high_m == math.inf,
+        }
 
 
 @dataclass(frozen=True)
@@ -354,8 +360,9 @@ def _m(value: float) -> str:
 
 def far_limit_text(rec: Mapping) -> str:
     """The far limit of a :class:`MaxRange` record: "11.7 m", "≥ 12 m", "none", or "8.2 m
-    (yet 3 of 3 correct at 12 m)" when the fit ends before a farthest range whose frames
-    all succeeded (isolated failures in between)."""
+    (failures between it and 12 m end it; the 3 frames at 12 m were all correct, too few to
+    show P ≥ 0.95 there)" when the fit ends before a farthest range whose frames all
+    succeeded (failures in between)."""
     if not rec.get("frames"):
         return "no frames"
     if rec["max_range_m"] <= 0:
@@ -365,8 +372,24 @@ def far_limit_text(rec: Mapping) -> str:
     text = f"{_m(rec['max_range_m'])} m"
     n = rec.get("farthest_frames", 0)
     if n and rec.get("farthest_successes") == n:  # success is not monotone: say so rather than hide it
-        text += f" (yet {n} of {n} correct at {_m(rec['farthest_tested_m'])} m)"
+        frames = "frame" if n == 1 else f"{n} frames"
+        text += (
+            f" (failures between it and {_m(rec['farthest_tested_m'])} m end it; the {frames} at "
+            f"{_m(rec['farthest_tested_m'])} m {'was' if n == 1 else 'were all'} correct, too few to show "
+            "P ≥ 0.95 there)"
+        )
     return text
+
+
+def works_best_key(rec: Mapping) -> tuple[float, float]:
+    """Sort key of a working-range record: larger is better. The far limit first (to 0.1 m:
+    finer differences are the pose jitter of the farthest frames), then the fraction of frames
+    correct, so that among settings no range of which reaches P ≥ 0.95 the one that works most
+    often comes first."""
+    reach = rec.get("max_range_m")
+    reach = round(float(reach), 1) if reach is not None and math.isfinite(reach) else 0.0
+    frames = rec.get("frames") or 0
+    return reach, (rec.get("successes") or 0) / frames if frames else 0.0
 
 
 def far_interval_text(rec: Mapping) -> str:
@@ -375,6 +398,8 @@ def far_interval_text(rec: Mapping) -> str:
     if not rec.get("frames"):
         return "–"
     low, high = rec["low_m"], rec["high_m"]
+    if high is None or rec.get("high_open"):  # read back from standard JSON: open above
+        high = math.inf
     if rec["max_range_m"] <= 0 and math.isfinite(high) and high < rec["nearest_tested_m"]:
         return f"< {_m(rec['nearest_tested_m'])} m"
     hi = f"> {_m(rec['farthest_tested_m'])}" if not math.isfinite(high) else _m(high)

@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 
 __all__ = ["RUNS_FILE", "read_parts", "record_part", "stored_frames", "timed_part", "total_seconds"]
 
@@ -66,7 +67,7 @@ def record_part(out: Path, command: str, elapsed_s: float, frames: int | None = 
     }
     parts = [*read_parts(out), part]
     Path(out).mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(Path(out) / RUNS_FILE, json.dumps({"parts": parts}, indent=2).encode())
+    atomic_write_bytes(Path(out) / RUNS_FILE, strict_json.dumps({"parts": parts}, indent=2).encode())
     return part
 
 

@@ -55,6 +55,7 @@ import numpy as np
 
 from scenes.hardware import HardwareSet, install_hardware, user_hardware
 from scenes.render_cache import atomic_write_bytes, content_key
+from studies.engine.strict_json import decode_non_finite, encode_non_finite
 
 TaskFunction = Callable[[dict], list[dict]]
 """A worker function: one JSON-able task in, its result rows out. It must be a module-level
@@ -71,8 +72,10 @@ MiB; a frame's wall time in its worker, s, its render included when it made one)
 :data:`MACHINE_LOG`, never part of the rows :func:`run_tasks` returns."""
 
 MACHINE_LOG = "machine.csv"
-"""Log of :data:`MACHINE_COLUMNS` in a sweep's output folder: one line per finished task's row
-and field (``task``: the key's first 16 hex digits, ``row``: index within the task's rows)."""
+"""Log of :data:`MACHINE_COLUMNS` in a sweep's output folder: one line per finished task and
+field when the task's rows share the value (a frame's measurement, logged on ``row`` 0, so
+summing a field sums each frame once), else one line per row (``task``: the key's first 16
+hex digits, ``row``: index within the task's rows)."""
 
 
 def no_progress(description: str, total: int, done: int) -> AbstractContextManager[Callable[[], None]]:
@@ -166,14 +169,14 @@ class ResultStore:
         """The stored rows, or None when missing or damaged (then the file is removed)."""
         path = self.path(key)
         try:
-            record = json.loads(path.read_text())
-            rows = record["rows"]
+            record = json.loads(path.read_text())  # also reads records written before strict JSON (bare NaN)
+            rows = decode_non_finite(record["rows"], record.get("non_finite", []))
             if record["sha256"] != _digest(rows) or record["key"] != key:
                 raise ValueError("digest")
             return rows
         except FileNotFoundError:
             return None
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, IndexError):
             path.unlink(missing_ok=True)
             return None
 
@@ -184,11 +187,14 @@ class ResultStore:
             if folder.is_symlink():  # the file would be written wherever the link points
                 raise ValueError(f"out: expected no symbolic links inside the output folder, got {folder}")
         path.parent.mkdir(parents=True, exist_ok=True)
-        record = {"key": key, "sha256": _digest(rows), "rows": rows}
-        atomic_write_bytes(path, json.dumps(record, sort_keys=True, allow_nan=True).encode())
+        clean, places = encode_non_finite(rows)
+        record = {"key": key, "sha256": _digest(rows), "rows": clean, "non_finite": places}
+        atomic_write_bytes(path, json.dumps(record, sort_keys=True, allow_nan=False).encode())
 
 
 def _digest(rows: list[dict]) -> str:
+    """SHA-256 of the rows as Python's JSON writes them (NaN as ``NaN``): the same digest as
+    records written before they were stored as strict JSON, so those still resume."""
     return hashlib.sha256(json.dumps(rows, sort_keys=True, allow_nan=True).encode()).hexdigest()
 
 
@@ -205,12 +211,12 @@ class MachineLog:
 
     def record(self, key: str, rows: list[dict]) -> None:
         """Log the machine fields of one finished task's rows (nothing when it has none)."""
-        lines = [
-            f"{key[:16]},{i},{name},{row[name]!r}\n"
-            for i, row in enumerate(rows)
-            for name in MACHINE_COLUMNS
-            if name in row
-        ]
+        lines = []
+        for name in MACHINE_COLUMNS:
+            values = [(i, row[name]) for i, row in enumerate(rows) if name in row]
+            if values and all(v == values[0][1] for _, v in values):
+                values = values[:1]  # one frame's measurement, shared by its rows: logged once
+            lines += [f"{key[:16]},{i},{name},{v!r}\n" for i, v in values]
         if not lines:
             return
         fd = open_in_place(self.path)

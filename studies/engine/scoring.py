@@ -26,8 +26,23 @@ RANGE_TOLERANCE = 0.10
 YAW_TOLERANCE_DEG = 5.0
 """Largest yaw error of a usable pose, degrees."""
 
-CAUSES = ("resolution / merging", "signal-to-noise", "colour", "saturation", "false blobs", "pose")
+CAUSES = (
+    "resolution / merging",
+    "signal-to-noise",
+    "colour",
+    "colour box",
+    "colour box (cores clipped)",
+    "saturation",
+    "false blobs",
+    "numbering",
+    "pose",
+    "image",
+)
 """Failure causes named by :func:`failure_cause`."""
+
+CLIPPED_CORES = 0.5
+"""Mean fraction of a marker core's pixels at the clip level above which a frame's cores count
+as clipped."""
 
 _DETECTION_COLUMNS = ("detected", "side_correct", "numbering_correct")
 
@@ -53,28 +68,64 @@ def pose_success(row: dict) -> bool:
 
 
 def failure_cause(row: dict) -> str:
-    """Why a frame failed, from what the detector and the camera report.
+    """Why a frame failed: from the detector's failure code (``failure``, a
+    :class:`pipeline.failures.Failure` value) first, then from what the camera reports.
 
-    * colour: a side was found but the wrong one (or markers of a wrong colour);
-    * false blobs: the right side's colour, but not its five markers correctly numbered, with
-      more than five blobs of that colour to choose from (``side_blobs``): the tracker took
-      blobs of sensor noise or clutter for markers (a whole frame at high gain has hundreds);
-    * saturation: markers not recognised and their cores mostly clipped (> 50 %);
-    * resolution / merging: markers not recognised and closer than ~2 blob diameters, or
-      the detector reports too few blobs (markers lost or merged,
-      :attr:`pipeline.failures.Failure.TOO_FEW_BLOBS`);
-    * signal-to-noise: markers not recognised, not clipped and well apart (too faint);
+    * colour: a side was found but the wrong one, or five markers of an unclear colour
+      (``colour-unclear``);
+    * colour box: the markers' pixels fell outside the tracker's colour box of the true side,
+      so fewer than five blobs of its colour were found (``no-side-colour``;
+      ``no-colour-with-five`` or ``no-fit`` with fewer than five blobs of the side's colour and
+      markers well apart); "colour box (cores clipped)" when the marker cores are mostly clipped
+      (> :data:`CLIPPED_CORES`), the usual reason a core leaves its box;
+    * false blobs: more than five blobs of the true side's colour (``side_blobs``) and no five
+      of them taken correctly (``no-colour-with-five``, ``no-fit``, or misnumbered markers):
+      the tracker took blobs of sensor noise or clutter for markers;
+    * resolution / merging: too few blobs of the side's colour (``too-few-blobs``), or no
+      five of them fit with markers closer than ~2 core diameters;
+    * signal-to-noise: nothing above the background (``no-blobs``), or no code and markers not
+      clipped and well apart (too faint);
+    * saturation: no code, markers not recognised and their cores mostly clipped;
+    * numbering: five blobs the study's numbering rule cannot order (``numbering``);
     * pose: detected and numbered but range off by > 10 % or yaw by > 5° (or misnumbered
-      with no extra blob to blame).
+      with no extra blob to blame; ``range``, ``attitude``, ``pose``);
+    * image: the image could not be used (``image``).
     """
+    side_blobs = row.get("side_blobs")
+    side_blobs = side_blobs if isinstance(side_blobs, int | float) and math.isfinite(side_blobs) else 0
+    extra = side_blobs > 5
     if row.get("detected"):
         if not row.get("side_correct"):
             return "colour"
-        extra = (row.get("side_blobs") or 0) > 5
         return "false blobs" if extra and not row.get("numbering_correct") else "pose"
-    if row.get("core_saturated_fraction_mean", 0.0) > 0.5:
+    clipped = (row.get("core_saturated_fraction_mean") or 0.0) > CLIPPED_CORES
+    spacing = row.get("marker_spacing_px")
+    spacing = spacing if isinstance(spacing, int | float) and math.isfinite(spacing) else math.inf
+    merged = spacing < 2.0 * (row.get("core_diameter_px") or 0.0)
+    box = "colour box (cores clipped)" if clipped else "colour box"
+    code = row.get("failure") or ""
+    if code == Failure.TOO_FEW_BLOBS:
+        return "resolution / merging"
+    if code == Failure.NO_BLOBS:
+        return "signal-to-noise"
+    if code == Failure.NO_SIDE_COLOUR:
+        return box
+    if code == Failure.COLOUR_UNCLEAR:
+        return "colour"
+    if code in (Failure.NO_COLOUR_WITH_FIVE, Failure.NO_FIT):
+        if extra:
+            return "false blobs"
+        if merged:
+            return "resolution / merging"
+        return box if side_blobs < 5 else "pose"  # five of the side's colour that do not fit its shape
+    if code == Failure.NUMBERING:
+        return "numbering"
+    if code in (Failure.RANGE, Failure.ATTITUDE, Failure.POSE):
+        return "pose"
+    if code == Failure.IMAGE:
+        return "image"
+    if clipped:
         return "saturation"
-    merged = row.get("failure") == Failure.TOO_FEW_BLOBS
-    if merged or row.get("marker_spacing_px", math.inf) < 2.0 * row.get("core_diameter_px", 0.0):
+    if merged:
         return "resolution / merging"
     return "signal-to-noise"

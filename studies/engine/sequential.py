@@ -54,7 +54,6 @@ same answer. ``<out>/design.json`` records every round.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -63,6 +62,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.max_range import estimate_max_range
 from studies.engine.metrics import jeffreys_interval
 from studies.engine.sweep import Execution, run_frames
@@ -541,5 +541,5 @@ def run_design(
     )
     result = DesignResult(all_rows, outcomes, spent, budget, design, log)
     Path(out).mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(Path(out) / "design.json", json.dumps(result.summary(), indent=2, allow_nan=True).encode())
+    atomic_write_bytes(Path(out) / "design.json", strict_json.dumps(result.summary(), indent=2).encode())
     return result

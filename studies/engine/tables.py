@@ -39,15 +39,18 @@ def parquet_bytes(frame) -> bytes:
 
 
 def detection_curve(frame, by: Sequence[str], x: str = "nominal_range_m"):
-    """Per group and x: frames, correct detections, Wilson 95 % interval."""
+    """Per group and x: ``frames``, ``successes`` (detection successes,
+    :func:`studies.engine.scoring.detection_success`: right side, five markers correctly
+    numbered; not the results' ``detected`` column, which is "five markers returned") and
+    ``p_detect`` = successes / frames with its Wilson 95 % interval (``p_low``, ``p_high``)."""
     keys = [*by, x]
     success = pd.Series(detection_successes(frame), index=frame.index)
     counts = success.groupby([frame[k] for k in keys], sort=True).agg(["size", "sum"])
-    table = counts.reset_index().rename(columns={"size": "frames", "sum": "detected"})
+    table = counts.reset_index().rename(columns={"size": "frames", "sum": "successes"})
     table["frames"] = table["frames"].astype(int)
-    table["detected"] = table["detected"].astype(int)
-    table["p_detect"], table["p_low"], table["p_high"] = wilson_intervals(table["detected"], table["frames"])
-    return table[[*keys, "frames", "detected", "p_detect", "p_low", "p_high"]]
+    table["successes"] = table["successes"].astype(int)
+    table["p_detect"], table["p_low"], table["p_high"] = wilson_intervals(table["successes"], table["frames"])
+    return table[[*keys, "frames", "successes", "p_detect", "p_low", "p_high"]]
 
 
 def pose_outcomes(frame, by: Sequence[str], x: str = "nominal_range_m"):

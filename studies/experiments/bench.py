@@ -45,6 +45,7 @@ from scenes.render import render, with_led_current
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
 from studies.catalog import replication
+from studies.engine import strict_json
 from studies.engine.frame import render_batch_key, simulate_frame
 from studies.engine.run_log import total_seconds
 from studies.engine.runner import run_tasks, worker_threads
@@ -605,16 +606,16 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
     with _render_cache_at(out / "cache"):
         for key in sample:  # near fields a batch needs and no earlier segment computed
             state["near_fields_s"] += _task_near_field_seconds(groups[key][0])
-            atomic_write_bytes(state_path, json.dumps(state).encode())
+            atomic_write_bytes(state_path, strict_json.dumps(state).encode())
         state["frames_wall_s"].append(0.0)
-        atomic_write_bytes(state_path, json.dumps(state).encode())
+        atomic_write_bytes(state_path, strict_json.dumps(state).encode())
         t0 = time.perf_counter()
         try:
             timed = replace(execution, progress=_segment_clock(execution.progress, state, state_path, t0))
             run_frames(work, out / "frames", timed, description="grid sample")
         finally:
             state["frames_wall_s"][-1] = time.perf_counter() - t0
-            atomic_write_bytes(state_path, json.dumps(state).encode())
+            atomic_write_bytes(state_path, strict_json.dumps(state).encode())
     frames_s = float(sum(state["frames_wall_s"]))
     near = state["near_fields_s"]
     per_batch = _batch_seconds(out / "frames", groups)
@@ -639,7 +640,7 @@ def grid_sample(out: Path, fraction: float = 0.01, seed: int = 0, execution: Exe
         "grid_cold_h": (frames_s * len(batch_geometry) / n + grid_near_s) / 3600.0,
         "grid_cold_h_95": _grid_hours(per_batch, len(batch_geometry), grid_near_s),
     }
-    atomic_write_bytes(out / "summary.json", json.dumps(summary, indent=2).encode())
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
 
@@ -658,7 +659,7 @@ def _segment_clock(progress, state: dict, path: Path, t0: float, every_s: float 
                 now = time.perf_counter()
                 state["frames_wall_s"][-1] = now - t0
                 if now - saved[0] >= every_s:
-                    atomic_write_bytes(path, json.dumps(state).encode())
+                    atomic_write_bytes(path, strict_json.dumps(state).encode())
                     saved[0] = now
 
             yield step

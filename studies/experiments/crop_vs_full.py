@@ -29,7 +29,6 @@ and the detectors, in one process, s.
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 import time
@@ -42,6 +41,7 @@ import pandas as pd
 from scenes.render_cache import atomic_write_bytes
 from scenes.view import camera_names
 from studies.engine import frame as engine_frame
+from studies.engine import strict_json
 from studies.engine.scoring import detection_success, pose_success
 from studies.engine.tasks import RENDER, StudyOptions, frame_tasks, grid_conditions
 
@@ -211,7 +211,7 @@ def run(
             "seconds": "per frame, camera (lens, sensor, ISP, JPEG) + both trackers + best estimator, render held",
         }
         document = {"settings": settings, "cost": result.cost, "summary": result.summary, "rows": rows}
-        atomic_write_bytes(result.paths["json"], json.dumps(document, indent=2, allow_nan=True).encode())
+        atomic_write_bytes(result.paths["json"], strict_json.dumps(document, indent=2).encode())
     return result
 
 

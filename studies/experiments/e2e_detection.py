@@ -41,7 +41,6 @@ Outputs (:func:`run`), in ``out``:
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import Counter
@@ -54,6 +53,7 @@ import pandas as pd
 
 from camera_models.camera import load_camera
 from scenes.render_cache import atomic_write_bytes
+from studies.engine import strict_json
 from studies.engine.scoring import RANGE_TOLERANCE, YAW_TOLERANCE_DEG, detection_success, failure_cause, pose_success
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
@@ -270,7 +270,7 @@ def write_outputs(result: E2EResult, out: Path, options: StudyOptions, exposure:
         "errors_over": "detection successes",
         "seconds": result.seconds,
     }
-    atomic_write_bytes(paths["config"], (json.dumps(config, indent=2, allow_nan=True) + "\n").encode())
+    atomic_write_bytes(paths["config"], (strict_json.dumps(config, indent=2) + "\n").encode())
     return paths
 
 

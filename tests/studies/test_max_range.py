@@ -156,7 +156,13 @@ def test_a_correct_farthest_range_beyond_an_isolated_failure_is_said():
     assert (result["farthest_successes"], result["farthest_frames"]) == (3, 3)
     # the monotone fit ends between the last clean range and the failure; the text keeps the 12 m successes
     assert not result["at_least"] and 8.0 <= result["max_range_m"] < 10.0
-    assert far_limit_text(result) == f"{result['max_range_m']:.1f} m (yet 3 of 3 correct at 12 m)"
+    # plain words, no contradiction: 3 of 3 correct is likely even where P < 0.95 (0.9³ = 0.73 > 0.05),
+    # so the 12 m frames cannot show P ≥ 0.95 there
+    assert 0.9**3 > 0.05
+    assert far_limit_text(result) == (
+        f"{result['max_range_m']:.1f} m (failures between it and 12 m end it; the 3 frames at 12 m were all correct, "
+        "too few to show P ≥ 0.95 there)"
+    )
     assert math.isinf(result["high_m"])  # 2 of 3 at 10 m cannot exclude P(10 m) ≥ 0.95
 
 
@@ -214,5 +220,7 @@ def test_failure_causes():
     assert failure_cause({**base, "marker_spacing_px": 8.0}) == "resolution / merging"
     assert failure_cause(base) == "signal-to-noise"
     assert failure_cause({**base, "failure": "too-few-blobs"}) == "resolution / merging"
-    assert failure_cause({**base, "failure": "no-fit"}) == "signal-to-noise"
+    assert failure_cause({**base, "failure": "no-fit"}) == "colour box"  # no blob of the side's colour
+    assert failure_cause({**base, "failure": "no-fit", "side_blobs": 9}) == "false blobs"
+    assert failure_cause({**base, "failure": "no-blobs"}) == "signal-to-noise"
     assert failure_cause({**base, "detected": True, "side_correct": False}) == "colour"
