@@ -75,6 +75,7 @@ def pairs_figure(result: HistoryMatch):
     extent = (0.0, 1.0, 0.0, 1.0)
     vmax = max(2 * result.settings.cutoff, 1.0)
     im_i = im_d = None
+    depth_max = max([1e-3] + [np.nanmax(_binned(q, nroy, c, r, "mean")) for r in range(d) for c in range(d) if r < c])
     for r in range(d):
         for c in range(d):
             ax = axes[r, c]
@@ -97,7 +98,7 @@ def pairs_figure(result: HistoryMatch):
             else:
                 im_d = ax.imshow(
                     _binned(q, nroy, c, r, "mean"), origin="lower", extent=extent, aspect="auto", cmap="magma",
-                    vmin=0, vmax=max(nroy.mean() * 4, 1e-3),
+                    vmin=0, vmax=depth_max,
                 )  # fmt: skip
             ticks, labels = _ticks(result, c)
             ax.set_xticks(ticks, labels if r == d - 1 else [], fontsize=6)
@@ -110,14 +111,15 @@ def pairs_figure(result: HistoryMatch):
                 ax.set_xlabel(_label(result, c), fontsize=7)
             if c == 0 and r != c:
                 ax.set_ylabel(_label(result, r), fontsize=7)
+    fig.subplots_adjust(left=0.2, right=0.8, bottom=0.1, top=0.88, wspace=0.25, hspace=0.25)
     if im_i is not None:
-        fig.colorbar(im_i, ax=axes[:, 0].tolist(), location="left", shrink=0.6, label="minimum implausibility")
+        fig.colorbar(im_i, cax=fig.add_axes((0.06, 0.25, 0.025, 0.5)), label="minimum implausibility")
     if im_d is not None:
-        fig.colorbar(im_d, ax=axes[:, -1].tolist(), location="right", shrink=0.6, label="optical depth (NROY share)")
+        fig.colorbar(im_d, cax=fig.add_axes((0.88, 0.25, 0.025, 0.5)), label="optical depth (NROY share)")
     fig.suptitle(
-        f"NROY after {len(result.waves)} waves: {result.nroy_fraction:.3g} of the space "
-        f"(lower: minimum implausibility, white line = cut-off {result.settings.cutoff:g}; upper and diagonal: "
-        "optical depth)",
+        f"NROY after {len(result.waves)} waves: {result.nroy_fraction:.3g} of the space\n"
+        f"lower: minimum implausibility (white line: cut-off {result.settings.cutoff:g}); "
+        "upper, diagonal: optical depth",
         fontsize=8,
     )
     return fig
