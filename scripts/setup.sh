@@ -57,10 +57,14 @@ fi
 if [ ! -x .venv/bin/python ]; then
     "$PY" -m venv .venv
 fi
+# The stamp holds a hash of pyproject.toml as installed: a changed dependency list is
+# installed even where the file's modification time is older than the stamp (a tree laid
+# with preserved times, a branch switched back), and an unchanged one is not reinstalled.
 stamp=.venv/.beacon-sim-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     .venv/bin/python -m pip install -q --upgrade pip
     .venv/bin/python -m pip install -q -e '.[dev]'
-    touch "$stamp"
+    echo "$want" > "$stamp"
 fi
 echo "setup: ready (.venv, $(.venv/bin/python --version))"
