@@ -56,6 +56,8 @@ def _name_of(path: Path, _mtime_ns: int) -> str:
         raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a TOML file ({str(exc).splitlines()[0]})") from None
+    except RecursionError:
+        raise ValueError(f"{path}: expected a TOML file nested a few levels deep, got one nested deeper") from None
     name = values.get("name")
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise ValueError(
