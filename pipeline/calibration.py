@@ -181,6 +181,8 @@ def load_calibration(path: str | Path) -> Calibration:
             tuple(d.get("pattern", PATTERN_INNER_CORNERS)), float(d.get("square_m", SQUARE_M)),
             tuple(str(w) for w in d.get("warnings", ())),
         )  # fmt: skip
+    except RecursionError:
+        raise ValueError(f"calibration: cannot read {p} (JSON nested too deep for a calibration file)") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"calibration: cannot read {p} ({type(exc).__name__}: {exc})") from None
     if k.shape != (3, 3) or not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:

@@ -244,13 +244,21 @@ def _check_choice(name: str, value: str, allowed) -> None:
         raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {value!r}")
 
 
-def check_resize(resize: float | None) -> None:
-    """Raise ``ValueError`` naming ``resize`` unless it is None or a scale in (0, 1]."""
+def check_resize(resize: float | None, size_px: tuple[int, int] | None = None) -> None:
+    """Raise ``ValueError`` naming ``resize`` unless it is None or a scale in (0, 1] that,
+    given the image's ``size_px`` (width, height), leaves it at least 1 px each way
+    (``cv2.resize`` fails on an empty result: ``--resize 1e-300``)."""
     if resize is None:
         return
     ok = isinstance(resize, int | float | np.floating) and not isinstance(resize, bool)
     if not (ok and math.isfinite(resize) and 0 < resize <= 1):
         raise ValueError(f"resize: expected a scale in (0, 1], got {resize!r}")
+    if size_px is not None and min(round(size_px[0] * resize), round(size_px[1] * resize)) < 1:
+        smallest = 0.5 / min(size_px)
+        raise ValueError(
+            f"resize: expected a scale that leaves the {size_px[0]}×{size_px[1]} px image at least 1 px "
+            f"each way (>= {smallest:.3g}), got {resize!r}"
+        )
 
 
 def detect(
@@ -326,6 +334,7 @@ def detect(
         result.reason, result.failure = reason, Failure.IMAGE
         return result
     h, w = bgr.shape[:2]
+    check_resize(resize, (w, h))
     origin, reason = _origin(w, h, intr, crop_origin_px)
     if reason:
         result.reason, result.failure = reason, Failure.IMAGE

@@ -75,6 +75,8 @@ class _JsonMessage:
             data = json.loads(text)
         except (TypeError, json.JSONDecodeError) as exc:
             raise ValueError(f"{cls._name}: not valid JSON ({exc})") from None
+        except RecursionError:
+            raise ValueError(f"{cls._name}: expected a flat JSON object, got one nested too deep") from None
         return cls.from_dict(data)
 
 

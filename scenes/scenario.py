@@ -25,6 +25,11 @@ from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
 from scenes.view import CameraGeometry, CameraPose, camera_geometry
 
+MAX_RANGE_M = 10_000.0
+"""Longest camera-to-beacon range a scenario accepts, m: at 10 km a beacon under a metre
+across subtends less than 0.1 mrad, under one pixel of any camera modelled (and ranges
+near 1e154 m overflowed the squared distances of the geometry)."""
+
 
 class ScenarioError(ValueError):
     """Bad input: the message names the field and what was expected, in one line."""
@@ -194,8 +199,8 @@ class Scenario:
             raise
         except ValueError as exc:
             raise ScenarioError(str(exc)) from None
-        if not _finite(self.range_m) or self.range_m <= 0:
-            raise ScenarioError(f"range_m: expected a distance > 0 m, got {self.range_m!r}")
+        if not _finite(self.range_m) or not 0 < self.range_m <= MAX_RANGE_M:
+            raise ScenarioError(f"range_m: expected a distance > 0 m and <= {MAX_RANGE_M:g} m, got {self.range_m!r}")
         if not _finite(self.yaw_deg) or abs(self.yaw_deg) > 90:
             raise ScenarioError(f"yaw_deg: expected an angle in [-90, 90] degrees, got {self.yaw_deg!r}")
         if not _finite(self.camera_height_m) or abs(self.camera_height_m) >= self.range_m:

@@ -46,6 +46,24 @@ def _strip(node: Any, where: str, provenance: dict[str, str]) -> Any:
     return node
 
 
+MAX_NESTING = 16
+"""Deepest nesting of tables and arrays a data file may have (the package's files use 3; a
+file nested thousands deep would exhaust Python's recursion in the readers)."""
+
+
+def nesting_depth(value: object) -> int:
+    """How deeply tables (dicts) and arrays (lists) nest in ``value`` (0 for a scalar), counted without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list | tuple) else None
+        if children is None:
+            continue
+        deepest = max(deepest, depth + 1)
+        stack.extend((child, depth + 1) for child in children)
+    return deepest
+
+
 def load_sourced(path: str | Path) -> tuple[dict[str, Any], dict[str, str]]:
     """Load a data file; return (values, provenance by dotted key)."""
     path = Path(path)
@@ -63,7 +81,9 @@ def loads_sourced(text: str, label: str) -> tuple[dict[str, Any], dict[str, str]
     except tomllib.TOMLDecodeError as exc:
         raise DataFileError(f"{label}: cannot read data file ({exc})") from exc
     except RecursionError:
-        raise DataFileError(f"{label}: cannot read data file (nested too deeply)") from None
+        raw = None
+    if raw is None or nesting_depth(raw) > MAX_NESTING:
+        raise DataFileError(f"{label}: expected tables and arrays nested at most {MAX_NESTING} deep, got deeper")
     provenance: dict[str, str] = {}
     try:
         values = _strip(raw, "", provenance)

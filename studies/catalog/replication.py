@@ -26,6 +26,7 @@ from scenes.render_cache import atomic_write_bytes
 from studies.engine import strict_json
 from studies.engine.max_range import COLUMNS, estimate_max_range
 from studies.engine.report import Report
+from studies.engine.runner import die_with_parent
 from studies.engine.sweep import Execution, sweep_in_chunks
 from studies.engine.tables import detection_curve
 from studies.engine.tasks import StudyOptions, grid_conditions
@@ -107,7 +108,8 @@ def max_range_table(frame, workers: int | None = None):
     groups = [(key, g[[c for c in COLUMNS if c in g]]) for key, g in best.groupby(keys, sort=True)]
     n = min(workers or os.cpu_count() or 1, len(groups))
     if n > 1:
-        with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
+        spawn = get_context("spawn")
+        with ProcessPoolExecutor(n, mp_context=spawn, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
             fits = list(pool.map(group_max_range, [g for _, g in groups], chunksize=4))
     else:
         fits = [group_max_range(g) for _, g in groups]

@@ -6,9 +6,11 @@ module registers them on one typer app, in the order ``--help`` lists them. Ever
 command that writes results writes JSON beside its pictures.
 
 At the edges: bad input ends the program with one line on stderr naming the field and what
-was expected (exit code 2), before any work; ``beacon-sim`` alone, ``-h`` and ``--help`` print
-help (exit 0); Ctrl-C stops at once with exit code 130, leaving the finished tasks stored so
-the same command resumes (:class:`InterruptGuard`).
+was expected (exit code 2), before any work; a run stopped by its surroundings (a full disk,
+a lost Dask scheduler, an unreadable task record: :class:`studies.engine.runner.RunStopped`)
+ends with one line naming the file or address (exit code 1), its finished tasks stored;
+``beacon-sim`` alone, ``-h`` and ``--help`` print help (exit 0); Ctrl-C stops at once with
+exit code 130, leaving the finished tasks stored so the same command resumes (:class:`InterruptGuard`).
 """
 
 from __future__ import annotations
@@ -34,13 +36,15 @@ from typer._click import exceptions as cli_errors  # typer's own (vendored) clic
 from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study, unknowns
 from studies.cli.common import console
 from studies.cli.out_folder import folder_command, release_out_dirs
-from studies.engine.runner import NoWorkersError
+from studies.engine.runner import DISK_FULL, NoWorkersError, RunStopped
 
 COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
 
 PROG = "beacon-sim"
 EXIT_USAGE = 2
+EXIT_STOPPED = 1
+"""Exit code of a run stopped by its surroundings (disk full, a lost Dask scheduler): one line on stderr."""
 EXIT_INTERRUPTED = 130
 """128 + SIGINT, what a shell reports for a program stopped by Ctrl-C."""
 INTERRUPTED_MESSAGE = f"{PROG}: interrupted; finished tasks are stored, re-run the same command to resume"
@@ -204,6 +208,15 @@ def main() -> None:
         code = _fail(usage_message(exc, args))
     except typer.Abort:  # end of input at a prompt
         code = 1
+    except RunStopped as exc:
+        code = EXIT_INTERRUPTED if guard.interrupted else _fail(str(exc), EXIT_STOPPED)
+    except OSError as exc:
+        if exc.errno not in DISK_FULL or guard.interrupted:
+            raise
+        where = exc.filename or "the output folder"
+        code = _fail(f"disk full at {where} ({exc.strerror}); free space and re-run the same command", EXIT_STOPPED)
+    except RecursionError:  # input nested too deep for a reader that names no field (those that do say so first)
+        code = _fail("input: expected data nested at most a few hundred levels deep, got deeper")
     except Exception:
         if not guard.interrupted:  # e.g. a pool broken by the same Ctrl-C
             raise
@@ -218,10 +231,10 @@ def main() -> None:
         sys.exit(code)
 
 
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = EXIT_USAGE) -> int:
     text = " ".join(message.split()) or "invalid input (see --help)"
     print(f"{PROG}: error: {text}", file=sys.stderr)
-    return EXIT_USAGE
+    return code
 
 
 def usage_message(exc: cli_errors.UsageError, args: list[str]) -> str:

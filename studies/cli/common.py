@@ -149,14 +149,30 @@ def execution(workers: int | None, scheduler: str | None = None, cache: bool = T
 
 
 def parse_list(name: str, text: str | None, convert=str) -> tuple | None:
-    """A comma-separated option as a tuple, or None when not given."""
+    """A comma-separated option as a tuple, or None when not given.
+
+    Repeated values are refused (one line naming the option and the value): a study's grid
+    would count the one frame each value stands for once per repeat (``--ranges-m 4,4,4``
+    reported one stored frame as three and narrowed its intervals), and merging them in
+    silence would run a different grid from the one asked for. More frames per value are
+    ``--seeds``.
+    """
     if text is None:
         return None
     items = [t.strip() for t in text.split(",") if t.strip()]
     try:
-        return tuple(convert(t) for t in items)
+        values = tuple(convert(t) for t in items)
     except ValueError:
         raise UsageError(f"{name}: expected a comma-separated list of numbers, got {text!r}") from None
+    seen: dict = {}
+    for item, value in zip(items, values, strict=True):
+        if value in seen:
+            same = item if item == seen[value] else f"{seen[value]} and {item}"
+            raise UsageError(
+                f"{name}: expected each value once (more frames per value: --seeds), got {same} more than once"
+            )
+        seen[value] = item
+    return values
 
 
 @contextlib.contextmanager

@@ -48,7 +48,11 @@ def read_parts(out: Path) -> list[dict]:
     path = Path(out) / RUNS_FILE
     if not path.is_file():
         return []
-    parts = json.loads(path.read_text()).get("parts", [])
+    try:
+        record = json.loads(path.read_text())
+    except (ValueError, RecursionError) as exc:
+        raise ValueError(f"runs: expected the run log beacon-sim wrote in {path}, got {type(exc).__name__}") from None
+    parts = record.get("parts", []) if isinstance(record, dict) else None
     if not isinstance(parts, list):
         raise ValueError(f"parts: expected a list in {path}, got {type(parts).__name__}")
     return parts

@@ -31,17 +31,31 @@ tasks are stored, so the same command resumes once workers are back.
 Interrupting (Ctrl-C, SIGINT) stops a local pool at once: pool workers die on SIGINT (the
 terminal sends it to the whole process group) and the parent terminates any that remain
 instead of waiting for the queued tasks; finished tasks are already stored, so running the
-same sweep again resumes.
+same sweep again resumes. Pool workers also die with their parent however it ends (SIGTERM,
+SIGKILL, a crash): :func:`die_with_parent` in each worker's start-up, so no worker is left
+holding its memory after the command is gone.
+
+A run that cannot go on for a reason outside its tasks raises :class:`RunStopped` with a
+one-line message: the disk is full (naming the file it could not write), a Dask scheduler
+was lost (naming its address), or a stored task record cannot be read (naming the file).
+Finished tasks are stored either way, so the same command resumes. A stored record that
+is not what its file name says (it does not parse, fails its digest, is another task's, or
+holds no rows: made or copied by hand) is reported in one warning line naming the file and
+its task computed again.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import hashlib
 import json
+import logging
 import os
 import signal
 import stat
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -56,6 +70,8 @@ import numpy as np
 from scenes.hardware import HardwareSet, install_hardware, user_hardware
 from scenes.render_cache import atomic_write_bytes, content_key
 from studies.engine.strict_json import decode_non_finite, encode_non_finite
+
+logger = logging.getLogger("beacon_sim")
 
 TaskFunction = Callable[[dict], list[dict]]
 """A worker function: one JSON-able task in, its result rows out. It must be a module-level
@@ -135,10 +151,50 @@ def run_one(function: TaskFunction, task: dict, hardware: HardwareSet | None = N
     return run_batch(function, [task], hardware)[0]
 
 
-def _worker_start() -> None:
+class RunStopped(RuntimeError):
+    """A run stopped for a reason outside its tasks (disk full, cluster lost, an unreadable
+    task record); the message is one line, and the finished tasks are stored."""
+
+
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+"""``errno`` values of a full disk (or quota)."""
+
+PR_SET_PDEATHSIG = 1
+"""``prctl`` option (Linux ``<sys/prctl.h>``): the signal a process gets when its parent dies."""
+
+PARENT_POLL_S = 0.5
+"""How often a worker's watchdog thread checks that its parent is alive, s."""
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Make this process end when ``parent_pid`` (its parent) does, however the parent ends.
+
+    On Linux the kernel sends SIGKILL the moment the parent dies (``prctl(PR_SET_PDEATHSIG)``);
+    everywhere, a daemon thread checks every :data:`PARENT_POLL_S` whether the process has
+    been re-parented and then exits at once. Ends the process now when the parent is already gone.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # no prctl: the watchdog alone
+            pass
+    if os.getppid() != parent_pid:  # died before the prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="beacon-sim-parent-watch", daemon=True).start()
+
+
+def worker_start(parent_pid: int) -> None:
     """Pool worker start-up: die at once on SIGINT, writing nothing (a Mitsuba render
-    cancelled by SIGINT would otherwise return a partial image as if it were complete)."""
+    cancelled by SIGINT would otherwise return a partial image as if it were complete), and
+    die with the parent process ``parent_pid`` (:func:`die_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+    die_with_parent(parent_pid)
 
 
 def run_batch(function: TaskFunction, tasks: list[dict], hardware: HardwareSet | None = None) -> list[list[dict]]:
@@ -166,19 +222,38 @@ class ResultStore:
         return Path(self.root) / key[:2] / f"{key}.json"
 
     def get(self, key: str) -> list[dict] | None:
-        """The stored rows, or None when missing or damaged (then the file is removed)."""
+        """The stored rows, or None when missing or not a record of ``key``.
+
+        A record that does not parse, fails its digest (cut short, bit-flipped), names another
+        key (copied from another task's file) or holds something other than rows (a list of
+        flat records) is reported in one warning line naming the file, removed, and its task
+        runs again. A record that cannot be read at all (a folder, no permission) raises
+        :class:`RunStopped` naming the file.
+        """
         path = self.path(key)
         try:
-            record = json.loads(path.read_text())  # also reads records written before strict JSON (bare NaN)
-            rows = decode_non_finite(record["rows"], record.get("non_finite", []))
-            if record["sha256"] != _digest(rows) or record["key"] != key:
-                raise ValueError("digest")
-            return rows
+            text = path.read_bytes()
         except FileNotFoundError:
             return None
-        except (ValueError, KeyError, TypeError, IndexError):
-            path.unlink(missing_ok=True)
-            return None
+        except OSError as exc:
+            raise RunStopped(f"tasks: cannot read the task record {path} ({exc.strerror or exc})") from None
+        problem = None
+        try:
+            record = json.loads(text)  # also reads records written before strict JSON (bare NaN)
+            rows = decode_non_finite(record["rows"], record.get("non_finite", []))
+            if record["sha256"] != _digest(rows):
+                problem = "its digest does not match its rows"
+            elif record["key"] != key:
+                problem = "it is the record of another task"
+            elif not _flat_rows(rows):
+                problem = "its rows are not a list of flat records"
+        except (ValueError, KeyError, TypeError, IndexError, RecursionError) as exc:
+            problem = f"it does not parse as a task record ({type(exc).__name__})"
+        if problem is None:
+            return rows
+        logger.warning("tasks: %s is not a record of task %s (%s); computing the task again", path, key[:12], problem)
+        path.unlink(missing_ok=True)
+        return None
 
     def put(self, key: str, rows: list[dict]) -> None:
         """Store ``rows`` for ``key`` atomically."""
@@ -189,7 +264,16 @@ class ResultStore:
         path.parent.mkdir(parents=True, exist_ok=True)
         clean, places = encode_non_finite(rows)
         record = {"key": key, "sha256": _digest(rows), "rows": clean, "non_finite": places}
-        atomic_write_bytes(path, json.dumps(record, sort_keys=True, allow_nan=False).encode())
+        with disk_full_names(path):
+            atomic_write_bytes(path, json.dumps(record, sort_keys=True, allow_nan=False).encode())
+
+
+def _flat_rows(rows: object) -> bool:
+    """Whether ``rows`` is what a task function returns: a list of dicts of strings to scalars."""
+    scalar = (str, int, float, bool, type(None))
+    return isinstance(rows, list) and all(
+        isinstance(r, dict) and all(isinstance(k, str) and isinstance(v, scalar) for k, v in r.items()) for r in rows
+    )
 
 
 def _digest(rows: list[dict]) -> str:
@@ -219,9 +303,29 @@ class MachineLog:
             lines += [f"{key[:16]},{i},{name},{v!r}\n" for i, v in values]
         if not lines:
             return
-        fd = open_in_place(self.path)
-        with os.fdopen(fd, "a", encoding="utf-8") as f:
-            f.write(("task,row,field,value\n" if os.fstat(fd).st_size == 0 else "") + "".join(lines))
+        with disk_full_names(self.path):
+            fd = open_in_place(self.path)
+            with os.fdopen(fd, "a", encoding="utf-8") as f:
+                f.write(("task,row,field,value\n" if os.fstat(fd).st_size == 0 else "") + "".join(lines))
+
+
+class disk_full_names:
+    """Turn a full disk (:data:`DISK_FULL`) while writing ``path`` into :class:`RunStopped`
+    naming it (a failed ``write`` or ``close`` says nothing of the file)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __enter__(self) -> disk_full_names:
+        return self
+
+    def __exit__(self, kind, exc, tb) -> bool:
+        if isinstance(exc, OSError) and exc.errno in DISK_FULL:
+            raise RunStopped(
+                f"disk full at {self.path} ({exc.strerror}); finished tasks are stored: "
+                "free some space and re-run the same command to resume"
+            ) from None
+        return False
 
 
 def open_in_place(path: Path) -> int:
@@ -331,7 +435,7 @@ def run_tasks(
     for key in keys:
         stored = store.get(key)
         if stored is None:
-            raise RuntimeError(f"task {key[:12]}: result missing after the run")
+            raise RunStopped(f"tasks: the record of task {key[:12]} went missing during the run ({store.path(key)})")
         rows.extend(without_machine_columns(stored))
     return rows
 
@@ -374,7 +478,9 @@ def _run_pool(
     # worker renders with its share of the cores (BEACON_SIM_THREADS, read at start-up)
     n = min(workers, len(batches))
     with worker_threads(n, threads_per_worker):
-        pool = ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn"), initializer=_worker_start)
+        pool = ProcessPoolExecutor(
+            max_workers=n, mp_context=get_context("spawn"), initializer=worker_start, initargs=(os.getpid(),)
+        )
         try:
             futures = {pool.submit(run_batch, function, list(batch.values()), hardware): batch for batch in batches}
             for future in as_completed(futures):
@@ -435,7 +541,11 @@ def _run_dask(
     from dask.distributed import as_completed as dask_completed
 
     watchdog = watchdog or WorkerWatchdog(NO_WORKER_TIMEOUT_S, f"the Dask scheduler at {address}")
-    with Client(address) as client:
+    try:
+        client = Client(address, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        raise _scheduler_lost(address, exc) from None
+    with client:
         futures = {
             client.submit(
                 run_batch, function, list(batch.values()), hardware, key=f"beacon-sim-{next(iter(batch))}", pure=False
@@ -447,24 +557,64 @@ def _run_dask(
             while not waiting.is_empty():
                 ready = waiting.next_batch(block=False)
                 for future in ready:
-                    rows = _dask_result(future, lambda: watchdog.observe(len(client.nthreads()), waiting.count()))
+                    if future.status == "cancelled" or client.status not in ("running", "connecting"):
+                        raise _scheduler_lost(address, None)
+                    rows = _dask_result(
+                        future, client, address, lambda: watchdog.observe(len(client.nthreads()), waiting.count())
+                    )
                     _store_batch(store, futures[future], rows, advance, log)
                 if not ready:  # nothing finished: is anyone still working on it?
-                    watchdog.observe(len(client.nthreads()), waiting.count())
+                    _watch(client, address, lambda: watchdog.observe(len(client.nthreads()), waiting.count()))
                     time.sleep(DASK_POLL_S)
         except (KeyboardInterrupt, SystemExit, NoWorkersError):
             client.cancel(list(futures))  # the cluster stops this sweep's tasks; finished ones are stored
             raise
 
 
-def _dask_result(future, check: Callable[[], None]) -> list[list[dict]]:
+def _dask_result(future, client, address: str, check: Callable[[], None]) -> list[list[dict]]:
     """A finished Dask future's result; while it is unavailable (its result was lost with a
-    worker and waits to be computed again) ``check`` runs between tries (the watchdog)."""
+    worker and waits to be computed again) ``check`` runs between tries (the watchdog). A lost
+    scheduler is :class:`RunStopped`; a task's own error passes while the cluster is up."""
     while True:
         try:
             return future.result(timeout=DASK_POLL_S)
         except TimeoutError:
-            check()
+            _watch(client, address, check)
+        except _cluster_errors() as exc:
+            if isinstance(exc, OSError) and client.status == "running":
+                raise
+            raise _scheduler_lost(address, exc) from None
+
+
+def _watch(client, address: str, check: Callable[[], None]) -> None:
+    """Run the watchdog's ``check``; a scheduler that is gone is :class:`RunStopped`."""
+    if client.status not in ("running", "connecting"):
+        raise _scheduler_lost(address, None)
+    try:
+        check()
+    except _cluster_errors() as exc:
+        raise _scheduler_lost(address, exc) from None
+
+
+SCHEDULER_TIMEOUT_S = 10.0
+"""How long a Dask client waits to (re)connect to its scheduler, s."""
+
+
+def _cluster_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions that mean the cluster, not a task, failed."""
+    from concurrent.futures import CancelledError
+
+    from distributed.comm.core import CommClosedError
+
+    return (CancelledError, CommClosedError, OSError, TimeoutError)
+
+
+def _scheduler_lost(address: str, exc: BaseException | None) -> RunStopped:
+    reason = f" ({type(exc).__name__}{': ' + str(exc) if str(exc) else ''})" if exc is not None else ""
+    return RunStopped(
+        f"scheduler: lost the Dask scheduler at {address}{reason}; finished tasks are stored: "
+        "restart the cluster and re-run the same command to resume"
+    )
 
 
 def selftest_task(task: dict) -> list[dict]:

@@ -29,6 +29,7 @@ from scenes.beacon import beacon_names
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import ENVIRONMENT_NAMES
 from scenes.led import SIDE_COLOURS, led_for_side
+from scenes.scenario import MAX_RANGE_M
 from scenes.view import camera_names
 
 FRAMES = ("full", "crop")
@@ -62,6 +63,8 @@ class StudyOptions:
         """Fail fast, before any work, with one line naming the bad option."""
 
         _check_choices("cameras", self.cameras, camera_names())
+        for name in ("cameras", "beacons", "sides", "environments", "ranges_m", "yaws_deg", "currents_mA", "diffusers"):
+            _check_distinct(name, getattr(self, name))
         if self.frame not in FRAMES:
             raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {self.frame!r}")
         _check_choices("beacons", self.beacons, beacon_names())
@@ -76,8 +79,8 @@ class StudyOptions:
                 raise ValueError(f"{name}: expected at least one value, got an empty list")
             if not all(isinstance(v, int | float) and math.isfinite(v) for v in values):
                 raise ValueError(f"{name}: expected finite numbers, got {list(values)}")
-        if min(self.ranges_m) <= 0:
-            raise ValueError(f"ranges_m: expected distances > 0 m, got {list(self.ranges_m)}")
+        if min(self.ranges_m) <= 0 or max(self.ranges_m) > MAX_RANGE_M:
+            raise ValueError(f"ranges_m: expected distances > 0 m and <= {MAX_RANGE_M:g} m, got {list(self.ranges_m)}")
         if max(abs(y) for y in self.yaws_deg) > 90:
             raise ValueError(f"yaws_deg: expected angles in [-90, 90], got {list(self.yaws_deg)}")
         for current in self.currents_mA:
@@ -93,6 +96,19 @@ class StudyOptions:
     def with_overrides(self, **overrides) -> StudyOptions:
         """These options with the user's non-None overrides."""
         return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+def _check_distinct(name: str, values: Sequence) -> None:
+    """Refuse a repeated grid value: each would count the same stored frames again."""
+    seen = set()
+    for value in values:
+        try:
+            repeated = value in seen
+            seen.add(value)
+        except TypeError:  # unhashable: validated (and refused) by the checks that follow
+            return
+        if repeated:
+            raise ValueError(f"{name}: expected each value once, got {value!r} more than once")
 
 
 def _check_choices(name: str, values: Sequence[str], allowed: Sequence[str]) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import threading
 import time
 
@@ -130,3 +131,40 @@ def test_an_unwritable_cache_still_makes_the_entry(tmp_path):
     blocker.write_text("a file where the cache folder should be")
     arrays, from_cache = RenderCache(blocker).get_or_make(content_key("x"), lambda: {"x": np.ones(2)})
     assert not from_cache and arrays["x"].tolist() == [1.0, 1.0]
+
+
+def test_an_entry_copied_over_another_is_a_miss_with_a_warning(tmp_path, caplog):
+    """Issue 26, hole 4: the digest covers the key, so a swapped entry is never used."""
+    cache = RenderCache(tmp_path)
+    a, b = content_key("entry a"), content_key("entry b")
+    cache.store(a, {"x": np.zeros(3)})
+    cache.store(b, {"x": np.ones(3)})
+    cache.path(b).write_bytes(cache.path(a).read_bytes())  # a valid entry, under the wrong name
+    assert cache.load(b) is None
+    assert cache.stats.corrupt == 1 and "another key" in caplog.text and str(cache.path(b)) in caplog.text
+    arrays, from_cache = cache.get_or_make(b, lambda: {"x": np.full(3, 2.0)})
+    assert not from_cache and arrays["x"].tolist() == [2.0, 2.0, 2.0]
+    assert cache.load(b)["x"].tolist() == [2.0, 2.0, 2.0] and cache.load(a)["x"].tolist() == [0.0, 0.0, 0.0]
+
+
+def test_a_format_1_entry_is_read_once_and_rewritten(tmp_path):
+    cache = RenderCache(tmp_path)
+    key = content_key("old entry")
+    buf = io.BytesIO()
+    np.savez_compressed(buf, x=np.arange(4.0))
+    legacy = cache.legacy_path(key)
+    legacy.parent.mkdir(parents=True)
+    legacy.write_bytes(hashlib.sha256(buf.getvalue()).hexdigest().encode() + buf.getvalue())
+    assert cache.load(key)["x"].tolist() == [0.0, 1.0, 2.0, 3.0]
+    assert cache.stats.migrated == 1 and not legacy.exists() and cache.path(key).is_file()
+    assert cache.load(key)["x"].tolist() == [0.0, 1.0, 2.0, 3.0] and cache.stats.migrated == 1
+
+
+def test_a_format_1_entry_in_the_format_2_folder_is_refused(tmp_path):
+    cache = RenderCache(tmp_path)
+    key = content_key("planted")
+    buf = io.BytesIO()
+    np.savez_compressed(buf, x=np.arange(2.0))
+    cache.path(key).parent.mkdir(parents=True)
+    cache.path(key).write_bytes(hashlib.sha256(buf.getvalue()).hexdigest().encode() + buf.getvalue())
+    assert cache.load(key) is None and cache.stats.corrupt == 1

@@ -190,3 +190,78 @@ def test_fuzzed_options_never_end_in_a_traceback(name, tmp_path, monkeypatch):
     check()
     print(f"{name}: {sum(outcomes.values())} command lines, outcomes {dict(outcomes)}")
     assert sum(outcomes.values()) >= min(EXAMPLES, 10)
+
+
+# -- issue 26: duplicated list values and image headers ---------------------------------
+
+LIST_OPTIONS = {
+    "ranges-m": ["2", "4", "4.0", "6.5", "8"],
+    "currents-ma": ["5", "10", "20", "20.0"],
+    "cameras": ["canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920"],
+    "beacons": ["v1", "v2"],
+}
+"""List options of ``study`` and values that are valid on their own."""
+
+
+@settings(max_examples=EXAMPLES * 2, deadline=None, derandomize=True, database=None)
+@given(
+    option=st.sampled_from(sorted(LIST_OPTIONS)),
+    data=st.data(),
+)
+def test_fuzzed_duplicated_list_values_are_refused_in_one_line(option, data, tmp_path_factory):
+    values = data.draw(st.lists(st.sampled_from(LIST_OPTIONS[option]), min_size=2, max_size=6))
+    repeated = len({float(v) if option in ("ranges-m", "currents-ma") else v for v in values}) < len(values)
+    with pytest.MonkeyPatch.context() as mp:
+        patch_work(mp)
+        mp.chdir(tmp_path_factory.mktemp("dup"))
+        code, out, err = invoke(["study", "range-limit", "--quick", "--out", "o", f"--{option}", ",".join(values)])
+    if repeated:
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1 and lines[0].startswith(f"beacon-sim: error: {option}:"), (values, err)
+        assert "more than once" in lines[0] and out == ""
+    else:
+        assert code in ("work", 2) and "Traceback" not in err, (values, err)
+
+
+@st.composite
+def image_headers(draw) -> bytes:
+    """A PNG, JPEG or TIFF header claiming any size, maybe cut short or followed by junk."""
+    from tests.studies.test_hostile_inputs import jpeg_header, png_header, tiff_header
+
+    width = draw(st.one_of(st.integers(0, 80), st.integers(0, 2**16 - 1), st.integers(0, 2**31)))
+    height = draw(st.one_of(st.integers(0, 80), st.integers(0, 2**16 - 1), st.integers(0, 2**31)))
+    kind = draw(st.sampled_from(["png", "jpeg", "tiff"]))
+    if kind == "png":
+        blob = png_header(min(width, 2**31 - 1), min(height, 2**31 - 1), draw(st.sampled_from([8, 16])))
+    elif kind == "jpeg":
+        blob = jpeg_header(min(width, 2**16 - 1), min(height, 2**16 - 1))
+    else:
+        blob = tiff_header(min(width, 2**32 - 1), min(height, 2**32 - 1))
+    cut = draw(st.integers(0, len(blob)))
+    return blob[: draw(st.sampled_from([len(blob), cut]))] + draw(st.binary(max_size=64))
+
+
+@settings(max_examples=EXAMPLES * 8, deadline=None, derandomize=True, database=None)
+@given(blob=image_headers())
+def test_fuzzed_image_headers_never_decode_too_large(blob, tmp_path_factory):
+    import pipeline.image_io as image_io
+    from pipeline.image_header import header_size
+
+    path = tmp_path_factory.mktemp("img") / "fuzz.img"
+    path.write_bytes(blob)
+    header = header_size(path)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(image_io, "MAX_PIXELS", 4096)  # decoding stays cheap: at most 64 × 64 px
+        real = image_io.cv2.imdecode
+
+        def guarded(*args, **kwargs):
+            assert header is not None and 0 < header.pixels <= 4096, "decoded past the header check"
+            return real(*args, **kwargs)
+
+        mp.setattr(image_io.cv2, "imdecode", guarded)
+        try:
+            image = image_io.load_image(path)
+        except ValueError as exc:
+            assert str(exc).startswith("image: ") and "\n" not in str(exc), str(exc)
+        else:
+            assert image.shape[0] * image.shape[1] <= 4096
