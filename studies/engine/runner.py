@@ -269,11 +269,9 @@ class ResultStore:
 
 
 def _flat_rows(rows: object) -> bool:
-    """Whether ``rows`` is what a task function returns: a list of dicts of strings to scalars."""
-    scalar = (str, int, float, bool, type(None))
-    return isinstance(rows, list) and all(
-        isinstance(r, dict) and all(isinstance(k, str) and isinstance(v, scalar) for k, v in r.items()) for r in rows
-    )
+    """Whether ``rows`` is what a task function returns: a list of records (dicts keyed by strings;
+    a study frame's values are scalars, an experiment's may be lists)."""
+    return isinstance(rows, list) and all(isinstance(r, dict) and all(isinstance(k, str) for k in r) for r in rows)
 
 
 def _digest(rows: list[dict]) -> str:
