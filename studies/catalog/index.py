@@ -444,8 +444,7 @@ def _colour_lines(wv: dict, cam: str, current: float | None) -> tuple[list[str],
     paired = {side for p in sep.get("pairs", []) for side in str(p["pair"]).split("-")}
     sides = sorted(paired or sep.get("mean_srgb", {}))
     lines = [
-        webcam_vs_dslr.separability_text(_with_floats(sep)),
-        f"{sep['right_colour']} of {sep['detections']} detections the right colour",
+        webcam_vs_dslr.separability_text(_with_floats(sep)),  # with the observed right-colour count
         f"webcam-vs-dslr: {_sides_text(sides) if sides else 'sides not recorded'}, {sep['led_current_mA']:g} mA, "
         f"{sep.get('frames', '?')} frames",
     ]
