@@ -336,17 +336,27 @@ def _lens(o: Fields) -> LensModel:
         vignetting=_vignetting(o),
         lensfun_camera=o.text("lensfun_camera", default=None) if o.has("lensfun_camera") else None,
         lensfun_lens=o.text("lensfun_lens", default=None) if o.has("lensfun_lens") else None,
-        glare=GlareSpread(
-            fraction=glare.number("fraction", minimum=0.0, maximum=1.0),
-            knee_um=glare.number("knee_um", positive=True),
-            exponent=glare.number("exponent", positive=True),
-            outer_radius_mm=glare.number("outer_radius_mm", positive=True),
-        )
-        if glare is not None
-        else None,
+        glare=_glare(glare) if glare is not None else None,
         crosstalk_fraction=crosstalk.number("fraction", minimum=0.0, maximum=0.5, default=0.0),
         crosstalk_diagonal_share=crosstalk.number("diagonal_share", minimum=0.0, maximum=1.0, default=0.0),
     )
+
+
+def _glare(g: Fields) -> GlareSpread:
+    """``[optics.glare]``, with the bounds :class:`~camera_models.glare.GlareSpread` needs checked
+    here, so an error names the file and the field."""
+    fraction = g.number("fraction", minimum=0.0, maximum=1.0)
+    if fraction >= 1.0:  # all the light in the tail leaves no image
+        raise DataFileError(f"{g.file}: {g.prefix}fraction: expected a number >= 0 and < 1, got {fraction!r}")
+    knee_um = g.number("knee_um", positive=True)
+    exponent = g.number("exponent", positive=True)
+    outer_radius_mm = g.number("outer_radius_mm", positive=True)
+    if not outer_radius_mm * 1e3 > knee_um:
+        raise DataFileError(
+            f"{g.file}: {g.prefix}outer_radius_mm: expected a number > knee_um / 1000 = {knee_um / 1e3:g} "
+            f"(the tail ends beyond its knee), got {outer_radius_mm!r}"
+        )
+    return GlareSpread(fraction=fraction, knee_um=knee_um, exponent=exponent, outer_radius_mm=outer_radius_mm)
 
 
 RELATIVE_ILLUMINATION_MODELS = ("natural", "vignetting")

@@ -628,6 +628,35 @@ def test_a_dotted_key_of_100000_parts_is_refused_before_parsing(tmp_path, monkey
     assert out == "" and elapsed < 5 and _max_rss_bytes() - rss < 200 << 20
 
 
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "knee_um = { value = 10.0,",
+            "knee_um = { value = 20000.0,",
+            "optics.glare.outer_radius_mm: expected a number > knee_um / 1000 = 20 (the tail ends beyond its knee), "
+            "got 13.4",
+        ),
+        (
+            "fraction = { value = 0.02,",
+            "fraction = { value = 1.0,",
+            "optics.glare.fraction: expected a number >= 0 and < 1, got 1.0",
+        ),
+    ],
+)
+def test_glare_bounds_name_the_file_and_field(tmp_path, monkeypatch, old, new, message):
+    """A glare knee beyond the tail's outer radius ended in ``glare.outer_radius_mm: expected >
+    knee`` (no file, no full field, no bound); a fraction of 1 likewise."""
+    _sandbox(tmp_path, monkeypatch)
+    from camera_models.camera import camera_template
+
+    text = camera_template("canon-t6-18mm").replace('name = "my-camera"', 'name = "glare"')
+    assert old in text
+    Path("g.toml").write_text(text.replace(old, new, 1))
+    code, _, err, _ = _run(["--camera-file", "g.toml", "cameras", "--json"])
+    assert _one_line(code, err, "g") == f"beacon-sim: error: camera file g.toml: {message}"
+
+
 def test_dotted_key_parts_counts_keys_not_strings_comments_or_numbers():
     from scenes.sourced import MAX_NESTING, dotted_key_parts
 
