@@ -420,6 +420,7 @@ def _sandbox(tmp_path: Path, monkeypatch) -> Path:
 # -- hardware files --------------------------------------------------------------------------
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # NaN or inf computed from a file: a finding
 def test_fuzzed_hardware_documents_end_in_one_line_or_load(tmp_path, monkeypatch):
     """Mutations of valid camera and beacon files: loaded, or one line naming the file; a
     misspelt or added key is an error naming it."""
@@ -447,6 +448,7 @@ def test_fuzzed_hardware_documents_end_in_one_line_or_load(tmp_path, monkeypatch
     assert outcomes["listing 0"] > 0 and outcomes["listing 2"] > 0  # both ends reached
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # NaN or inf computed from a file: a finding
 def test_fuzzed_raw_hardware_files_end_in_one_line(tmp_path, monkeypatch):
     """Files that are not a valid document at all: cut, binary, not UTF-8, nested 17 to 100000
     levels, over 1 MiB."""
@@ -508,6 +510,7 @@ def _place(folder: Path, name: str, what: str, data: bytes, outside: Path) -> No
         target.symlink_to("/dev/zero")
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # NaN or inf computed from a file: a finding
 def test_fuzzed_files_a_camera_names_end_in_one_line_or_load(tmp_path, monkeypatch):
     """``body`` and ``sensor.ssf_csv`` naming missing files, links, loops, folders, FIFOs, paths
     and garbage CSV: loaded, or one line; never read past the limit nor blocked on a FIFO."""
@@ -655,6 +658,39 @@ def test_glare_bounds_name_the_file_and_field(tmp_path, monkeypatch, old, new, m
     Path("g.toml").write_text(text.replace(old, new, 1))
     code, _, err, _ = _run(["--camera-file", "g.toml", "cameras", "--json"])
     assert _one_line(code, err, "g") == f"beacon-sim: error: camera file g.toml: {message}"
+
+
+GOOD_CSV = "wavelength_nm,r,g,b\n380,0.1,0.2,0.3\n720,0.2,0.3,0.1\n"
+
+
+@pytest.mark.parametrize(
+    ("csv_text", "reason"),
+    [
+        (
+            GOOD_CSV.replace("0.2,0.3,0.1", "0.2,0,0.1").replace("0.1,0.2,0.3", "0.1,0,0.3"),
+            "g: expected a sensitivity > 0 somewhere in 380-720 nm, got none",
+        ),
+        (GOOD_CSV.replace("0.2,0.3", "nan,0.3", 1), "r, g, b: expected finite sensitivities >= 0"),
+        (GOOD_CSV.replace("0.2,0.3,0.1", "-0.2,0.3,0.1"), "r, g, b: expected finite sensitivities >= 0"),
+        (GOOD_CSV.replace("720,", "380,"), "wavelength_nm: expected finite wavelengths in increasing order, each once"),
+        ("wavelength_nm,r,g,b\n500,0.1,0.2,0.3\n", "expected at least 2 rows of wavelengths, got 1"),
+    ],
+)
+def test_a_spectral_sensitivity_csv_that_gives_no_curve_is_one_line(tmp_path, monkeypatch, csv_text, reason):
+    """A CSV whose green channel is all zero was accepted with NaN quantum efficiencies (a
+    ``RuntimeWarning: divide by zero`` in the fuzz run, ``peak_qe_green: null`` in the listing);
+    NaN, negative, repeated or unsorted wavelengths and a single row were accepted silently."""
+    _sandbox(tmp_path, monkeypatch)
+    values = SEEDS["camera with its own csv"][1]
+    Path("cam.toml").write_text(toml_document(values))
+    Path(CSV_NAME).write_text(csv_text)
+    code, _, err, _ = _run(["--camera-file", "cam.toml", "cameras", "--json"])
+    assert _one_line(code, err, "cam") == (
+        f"beacon-sim: error: camera file cam.toml: sensor.ssf_csv: expected a CSV with columns wavelength_nm, r, g, b "
+        f"({reason})"
+    )
+    Path(CSV_NAME).write_text(GOOD_CSV)
+    assert _run(["--camera-file", "cam.toml", "cameras", "--json"])[0] == 0
 
 
 def test_dotted_key_parts_counts_keys_not_strings_comments_or_numbers():
