@@ -240,10 +240,19 @@ def ssf_qe(csv_text: str, peak_qe: float, energy_response: bool) -> NDArray[np.f
     equals ``peak_qe``.
     """
     rows = list(csv.DictReader(io.StringIO(csv_text)))
+    if len(rows) < 2:
+        raise ValueError(f"expected at least 2 rows of wavelengths, got {len(rows)}")
     lam = np.array([float(r["wavelength_nm"]) for r in rows])
     rgb = np.array([[float(r[c]) for r in rows] for c in "rgb"])
+    if not np.isfinite(lam).all() or not (np.diff(lam) > 0).all():
+        raise ValueError("wavelength_nm: expected finite wavelengths in increasing order, each once")
+    if not np.isfinite(rgb).all() or (rgb < 0).any():
+        raise ValueError("r, g, b: expected finite sensitivities >= 0")
     qe = np.stack([np.interp(spectra.WAVELENGTHS_NM, lam, ch, left=0.0, right=0.0) for ch in rgb])
-    qe = np.clip(qe, 0.0, None)
+    for channel, curve in zip("rgb", qe, strict=True):
+        if not curve.max() > 0:
+            lo, hi = spectra.WAVELENGTHS_NM[0], spectra.WAVELENGTHS_NM[-1]
+            raise ValueError(f"{channel}: expected a sensitivity > 0 somewhere in {lo:.0f}-{hi:.0f} nm, got none")
     if energy_response:
         qe = qe / spectra.WAVELENGTHS_NM
     return qe * (peak_qe / qe[1].max())
@@ -336,17 +345,27 @@ def _lens(o: Fields) -> LensModel:
         vignetting=_vignetting(o),
         lensfun_camera=o.text("lensfun_camera", default=None) if o.has("lensfun_camera") else None,
         lensfun_lens=o.text("lensfun_lens", default=None) if o.has("lensfun_lens") else None,
-        glare=GlareSpread(
-            fraction=glare.number("fraction", minimum=0.0, maximum=1.0),
-            knee_um=glare.number("knee_um", positive=True),
-            exponent=glare.number("exponent", positive=True),
-            outer_radius_mm=glare.number("outer_radius_mm", positive=True),
-        )
-        if glare is not None
-        else None,
+        glare=_glare(glare) if glare is not None else None,
         crosstalk_fraction=crosstalk.number("fraction", minimum=0.0, maximum=0.5, default=0.0),
         crosstalk_diagonal_share=crosstalk.number("diagonal_share", minimum=0.0, maximum=1.0, default=0.0),
     )
+
+
+def _glare(g: Fields) -> GlareSpread:
+    """``[optics.glare]``, with the bounds :class:`~camera_models.glare.GlareSpread` needs checked
+    here, so an error names the file and the field."""
+    fraction = g.number("fraction", minimum=0.0, maximum=1.0)
+    if fraction >= 1.0:  # all the light in the tail leaves no image
+        raise DataFileError(f"{g.file}: {g.prefix}fraction: expected a number >= 0 and < 1, got {fraction!r}")
+    knee_um = g.number("knee_um", positive=True)
+    exponent = g.number("exponent", positive=True)
+    outer_radius_mm = g.number("outer_radius_mm", positive=True)
+    if not outer_radius_mm * 1e3 > knee_um:
+        raise DataFileError(
+            f"{g.file}: {g.prefix}outer_radius_mm: expected a number > knee_um / 1000 = {knee_um / 1e3:g} "
+            f"(the tail ends beyond its knee), got {outer_radius_mm!r}"
+        )
+    return GlareSpread(fraction=fraction, knee_um=knee_um, exponent=exponent, outer_radius_mm=outer_radius_mm)
 
 
 RELATIVE_ILLUMINATION_MODELS = ("natural", "vignetting")
@@ -392,8 +411,9 @@ def _sensor(s: Fields, source: HardwareFile) -> SensorModel:
     if white <= black:
         raise DataFileError(f"{s.file}: {s.prefix}white_level_DN: expected a number > black_level_DN, got {white!r}")
     ssf = _ssf_text(s, source)
+    peak_qe, energy_response = s.number("peak_qe", positive=True, maximum=1.0), s.flag("ssf_is_energy_response")
     try:
-        qe = ssf_qe(ssf, s.number("peak_qe", positive=True, maximum=1.0), s.flag("ssf_is_energy_response"))
+        qe = ssf_qe(ssf, peak_qe, energy_response)
     except (KeyError, ValueError) as exc:
         raise DataFileError(
             f"{s.file}: {s.prefix}ssf_csv: expected a CSV with columns wavelength_nm, r, g, b ({exc})"

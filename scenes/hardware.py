@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
+from scenes.sourced import check_dotted_keys
+
 __all__ = [
     "MAX_FILE_BYTES",
     "NAME_PATTERN",
@@ -201,9 +203,12 @@ def _read(path: Path, what: str) -> bytes:
 
 
 def _toml(data: bytes, what: str) -> dict:
-    """Parsed TOML (one-line errors naming ``what``)."""
+    """Parsed TOML (one-line errors naming ``what``); a dotted key too long to parse in bounded
+    time and memory is refused first (:func:`scenes.sourced.check_dotted_keys`)."""
     try:
-        return tomllib.loads(data.decode("utf-8"))
+        text = data.decode("utf-8")
+        check_dotted_keys(text, what)
+        return tomllib.loads(text)
     except UnicodeDecodeError:
         raise ValueError(f"{what}: not a TOML file (not UTF-8 text)") from None
     except tomllib.TOMLDecodeError as exc:
@@ -312,7 +317,11 @@ def add_hardware_file(kind: str, path: str | Path) -> str:
     is read again (a new command sees the file's new contents).
     """
     _check_kind(kind)
-    path = Path(path).expanduser().resolve()
+    try:
+        path = Path(path).expanduser().resolve()
+    except RuntimeError:  # ~user with no such user, or (Python 3.11) a loop of symbolic links
+        why = "no such user's home folder" if str(path).startswith("~") else "a loop of symbolic links"
+        raise ValueError(f"{kind}-file: expected a TOML file, got {path} ({why})") from None
     if not path.is_file():
         raise ValueError(f"{kind}-file: expected a TOML file, {path} is not a file")
     loaded = _load(kind, path, builtin=False)

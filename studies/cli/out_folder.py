@@ -191,7 +191,12 @@ def prepare_out_dir(out: Path, lock: bool = True, part: str | None = None) -> Pa
 
 
 def _check_not_system(out: Path) -> None:
-    where = out.resolve()
+    try:
+        where = out.resolve()
+    except RuntimeError:  # Python 3.11's resolve() on a loop of symbolic links
+        raise UsageError(
+            f"out: expected a folder or a new name, got {out} (a loop of symbolic links; remove the link)"
+        ) from None
     text = str(where)
     if text in SYSTEM_FOLDERS or any(text.startswith(p + "/") for p in PSEUDO_FOLDERS):
         raise UsageError(
