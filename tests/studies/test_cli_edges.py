@@ -122,14 +122,6 @@ def assert_one_line_error(code, err: str, field: str | None = None) -> str:
     return lines[0]
 
 
-@pytest.fixture
-def work(monkeypatch, tmp_path):
-    """Work functions patched; the current folder is an empty temporary one."""
-    patch_work(monkeypatch)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
-
-
 # -- render limits, cache, empty --out: one line, nothing written ----------------------
 
 

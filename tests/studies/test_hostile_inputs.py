@@ -26,17 +26,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.studies.test_cli_edges import assert_one_line_error, invoke, patch_work
+from tests.studies.test_cli_edges import assert_one_line_error, invoke
 
 REPO = Path(__file__).parents[2]
-
-
-@pytest.fixture
-def work(monkeypatch, tmp_path):
-    """Work functions patched; the current folder is an empty temporary one."""
-    patch_work(monkeypatch)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 # -- hole 5: repeated values in list options -----------------------------------------

@@ -17,20 +17,12 @@ from pathlib import Path
 
 import pytest
 
-from tests.studies.test_cli_edges import REPO, assert_one_line_error, invoke, patch_work
+from tests.studies.test_cli_edges import REPO, assert_one_line_error, invoke
 
 LOCK = ".beacon-sim.lock"
 MARKER = ".beacon-sim.json"
 STUDY = ["study", "range-limit", "--quick", "--out"]
 PRECIOUS = b"the user's own file\n"
-
-
-@pytest.fixture
-def work(monkeypatch, tmp_path):
-    """Work functions patched; the current folder is an empty temporary one."""
-    patch_work(monkeypatch)
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
 
 
 def _victim(work: Path) -> Path:
