@@ -11,7 +11,7 @@ from camera_models.camera import load_camera
 from scenes.beacon import beacon_design
 from scenes.hardware import add_hardware_file
 from scenes.view import camera_names
-from tests.studies.test_cli_edges import assert_one_line_error, invoke, work  # noqa: F401  (fixture)
+from tests.studies.test_cli_edges import assert_one_line_error, invoke
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CAMERA = EXAMPLES / "rpi-hq-6mm.toml"
@@ -135,7 +135,7 @@ def test_hole9_a_node_wider_than_the_beacon_is_refused(tmp_path):
     assert str(info.value).endswith("got 5000.0")
 
 
-def test_hole9_bounds_and_unknown_keys_are_one_line_before_any_work(work, tmp_path):  # noqa: F811
+def test_hole9_bounds_and_unknown_keys_are_one_line_before_any_work(work, tmp_path):
     node = _edited(tmp_path, BEACON, "node_radius_mm = { value = 50.0", "node_radius_mm = { value = 5000.0", "n.toml")
     code, _out, err = invoke(["render", "--beacon-file", str(node), "--range-m", "3", "--out", "o"])
     assert "node_radius_mm: expected a number > 0 and <= 71" in assert_one_line_error(code, err)

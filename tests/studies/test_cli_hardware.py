@@ -8,7 +8,7 @@ import pytest
 
 from studies.cli.app import click_command
 from studies.cli.hardware import use_hardware_files
-from tests.studies.test_cli_edges import assert_one_line_error, invoke, work  # noqa: F401  (fixture)
+from tests.studies.test_cli_edges import assert_one_line_error, invoke
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CAMERA = str(EXAMPLES / "rpi-hq-6mm.toml")
@@ -47,14 +47,14 @@ def test_the_listing_shows_the_users_camera(capsys):
         (["render", "--out", "o", "--camera", "../data/canon-t6-18mm"], "camera: expected one of canon-t6-10mm"),
     ],
 )
-def test_bad_hardware_is_one_line_before_any_work(work, args, start):  # noqa: F811
+def test_bad_hardware_is_one_line_before_any_work(work, args, start):
     code, _out, err = invoke(args)
     line = assert_one_line_error(code, err)
     assert line.startswith(f"beacon-sim: error: {start}") or start in line, line
     assert not (work / "o").exists()
 
 
-def test_a_bad_field_names_file_and_field(work, tmp_path):  # noqa: F811
+def test_a_bad_field_names_file_and_field(work, tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(Path(CAMERA).read_text().replace("value = 1.55,", "value = -1.5,"))
     code, _out, err = invoke(["capture", "--camera-file", str(bad), "--out", "o"])
@@ -66,6 +66,6 @@ def test_a_bad_field_names_file_and_field(work, tmp_path):  # noqa: F811
     assert not (work / "o").exists()
 
 
-def test_a_good_file_reaches_the_work(work):  # noqa: F811
+def test_a_good_file_reaches_the_work(work):
     code, _out, err = invoke(["--beacon-file", BEACON, "capture", "--camera-file", CAMERA, "--out", "o"])
     assert code == "work", err
