@@ -176,7 +176,7 @@ def fit_counter(monkeypatch):
     return count
 
 
-@pytest.mark.parametrize("design_name", ["v2", "v1"])
+@pytest.mark.parametrize("design_name", ["v2", pytest.param("v1", marks=pytest.mark.slow)])  # v1: 24 s, slow
 def test_pruned_search_returns_the_full_search_answer_on_random_frames(design_name, fit_counter):
     """120 frames per design (:func:`_synthetic_blobs`): the pruned search's answer is the old
     search's (same five, numbering, RMS and blobs); stopping a failed search early never

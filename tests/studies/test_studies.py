@@ -75,6 +75,7 @@ def test_replication_grid_is_the_issues_grid_and_runs_tiny(tmp_path):
     assert (tmp_path / "configurations.csv").is_file()
 
 
+@pytest.mark.slow  # 53 s; test_validate_runs_every_test_at_each_calibrated_point covers validate by default
 def test_validate_tiny(tmp_path, monkeypatch):
     pairs = validate.test_conditions(True)
     subset = [next(p for p in pairs if p[0] == "preliminary" and p[1]["side"] == "red")]

@@ -83,6 +83,7 @@ def test_calibrated_set_refuses_what_it_cannot_use(tmp_path):
         unknowns_search.calibrated_set(csv)
 
 
+@pytest.mark.slow  # 95 s; the default run's budget is 10 min on 2 cores
 def test_tiny_search_scores_every_point_on_every_condition_and_side(tmp_path, monkeypatch, mitsuba_variant):
     monkeypatch.setattr(
         unknowns_search, "RENDER", {"spp": 1, "oversampling": 1, "crop": "target", "near_field_spp": 16}
