@@ -36,8 +36,8 @@ def _no_user_hardware():
 @pytest.fixture
 def work(monkeypatch, tmp_path):
     """The CLI's work functions patched to fast fakes; the current folder is an empty temporary
-    one (tests/studies/test_cli_edges.py says what each fake returns)."""
-    from tests.studies.test_cli_edges import patch_work
+    one (tests/helpers/cli.py)."""
+    from tests.helpers.cli import patch_work
 
     patch_work(monkeypatch)
     monkeypatch.chdir(tmp_path)

@@ -11,7 +11,7 @@ from camera_models.camera import load_camera
 from scenes.beacon import beacon_design
 from scenes.hardware import add_hardware_file
 from scenes.view import camera_names
-from tests.studies.test_cli_edges import assert_one_line_error, invoke
+from tests.helpers.cli import assert_one_line_error, invoke
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CAMERA = EXAMPLES / "rpi-hq-6mm.toml"

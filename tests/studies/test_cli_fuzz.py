@@ -4,7 +4,7 @@ For each command, hypothesis draws command lines from its own options (valid val
 negative, zero, huge, NaN, infinite, empty, unknown names, path tricks like ``../../x``, random
 text, unknown options, extra arguments, help flags) and runs them through
 :func:`studies.cli.app.main` in this process, with every function that would start work
-replaced by one raising :class:`~tests.studies.test_cli_edges.WorkStarted`. Each outcome must
+replaced by one raising :class:`~tests.helpers.cli.WorkStarted`. Each outcome must
 be one of: work would start; a clean exit 0 (help, version, a listing); or exactly one line
 ``beacon-sim: error: ...`` on stderr with exit code 2, nothing on stdout and nothing created
 under the sandbox. The run is bounded and deterministic: :data:`EXAMPLES` command lines per
@@ -21,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.studies.test_cli_edges import invoke, patch_work
+from tests.helpers.cli import invoke, patch_work
 
 EXAMPLES = int(os.environ.get("BEACON_SIM_FUZZ_EXAMPLES", "25"))
 """Command lines drawn per command."""

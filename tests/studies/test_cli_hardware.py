@@ -8,7 +8,7 @@ import pytest
 
 from studies.cli.app import click_command
 from studies.cli.hardware import use_hardware_files
-from tests.studies.test_cli_edges import assert_one_line_error, invoke
+from tests.helpers.cli import assert_one_line_error, invoke
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CAMERA = str(EXAMPLES / "rpi-hq-6mm.toml")

@@ -1,7 +1,7 @@
 """Property-based fuzzing of the inputs issue 26's hostile user broke: hardware files and ``--out``.
 
 Two families of inputs, each drawn by hypothesis and run through :func:`studies.cli.app.main` in
-this process (``test_cli_edges``'s :func:`invoke`, with every work function replaced by
+this process (``tests.helpers.cli``'s :func:`invoke`, with every work function replaced by
 :func:`patch_work`, so nothing renders):
 
 * **Hardware files** (``--camera-file`` / ``--beacon-file``). Documents start from a valid file
@@ -54,7 +54,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.studies.test_cli_edges import REPO, invoke, patch_work
+from tests.helpers.cli import REPO, invoke, patch_work
 
 EXAMPLES = int(os.environ.get("BEACON_SIM_FUZZ_EXAMPLES", "25"))
 """Cases drawn per test (``BEACON_SIM_FUZZ_EXAMPLES`` sets it)."""

@@ -6,7 +6,7 @@ hole 8, pool workers that outlive their parent; hole 10, the tracebacks of seven
 scheduler, forged task records). Hole 4 (a render-cache entry copied over another) is in
 ``tests/scenes/test_render_cache.py``.
 
-Commands run in this process through :func:`tests.studies.test_cli_edges.invoke`; no test
+Commands run in this process through :func:`tests.helpers.cli.invoke`; no test
 renders. Top-level imports stay light: spawned pool workers import the runner only.
 """
 
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.studies.test_cli_edges import assert_one_line_error, invoke
+from tests.helpers.cli import assert_one_line_error, invoke
 
 REPO = Path(__file__).parents[2]
 

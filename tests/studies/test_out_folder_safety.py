@@ -1,7 +1,7 @@
 """What a careless or hostile ``--out`` can do, and what the program now does instead
 (issue 26, holes 1, 6 and 12, and the lock files left behind).
 
-Commands run in this process with their work functions replaced (``test_cli_edges``'s
+Commands run in this process with their work functions replaced (``tests.helpers.cli``'s
 :func:`invoke` and :func:`patch_work`), so no test renders; the cache-placement test runs a
 subprocess with ``HOME`` and ``BEACON_SIM_CACHE`` pointed at temporary folders.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.studies.test_cli_edges import REPO, assert_one_line_error, invoke
+from tests.helpers.cli import REPO, assert_one_line_error, invoke
 
 LOCK = ".beacon-sim.lock"
 MARKER = ".beacon-sim.json"

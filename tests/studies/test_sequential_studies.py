@@ -16,7 +16,7 @@ from studies.catalog.index import write_index
 from studies.engine import sequential
 from studies.engine.max_range import LN19
 from studies.engine.sequential import SequentialDesign
-from tests.studies.test_cli_edges import assert_one_line_error, invoke, patch_work
+from tests.helpers.cli import assert_one_line_error, invoke, patch_work
 
 T6, C270 = "canon-t6-18mm", "logitech-c270"
 TRUTH = {T6: (14.0, 0.6), "canon-t6-10mm": (9.0, 0.4), C270: (8.0, 0.5), "spedal-920": (5.0, 0.3)}
