@@ -130,5 +130,5 @@ def write_dataset(camera: Camera, analog_gain: float, out: Path, seed: int = 0, 
     truth["irradiance_W_m2"] = (
         photons_per_s / photons_per_joule(setup.wavelength_nm) / (camera.geometry.pixel_pitch_um * 1e-6) ** 2
     )
-    (out / "truth.json").write_text(json.dumps(truth, indent=2), encoding="utf-8")
+    (out / "truth.json").write_text(json.dumps(truth, indent=2, allow_nan=False), encoding="utf-8")  # RFC 8259
     return truth

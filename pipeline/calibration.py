@@ -112,7 +112,7 @@ class Calibration:
     def save(self, path: str | Path) -> Path:
         """Write the calibration file (JSON)."""
         p = Path(path)
-        p.write_text(json.dumps(self.to_dict(), indent=2))
+        p.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False))  # standard JSON: every field is finite
         return p
 
     def intrinsics(self) -> Intrinsics:

@@ -99,7 +99,7 @@ def configuration_table(frame):
         )
         rec.update(
             frames=n,
-            detected=int(k),
+            successes=int(k),
             p_detect=p,
             p_low=lo,
             p_high=hi,
@@ -120,7 +120,7 @@ def recommend(table) -> list[dict]:
     """Per camera and side: of the configurations in the window at every range studied
     (best tracker), the one with the least core saturation at its worst range, ties
     broken by the lower LED power. ``p_detect`` and ``p_low`` are the lowest over the
-    ranges (Wilson 95 % lower bound), ``detected`` of ``frames`` the frames behind them
+    ranges (Wilson 95 % lower bound), ``successes`` of ``frames`` the frames behind them
     summed over the ranges; ``diffuser`` is the configuration in words."""
     out = []
     best = table[table.tracker == "best"]
@@ -132,7 +132,7 @@ def recommend(table) -> list[dict]:
             p_detect=("p_detect", "min"),
             p_low=("p_low", "min"),
             frames=("frames", "sum"),
-            detected=("detected", "sum"),
+            successes=("successes", "sum"),
             led_power_mW=("led_power_mW", "first"),
             side_power_mW=("side_power_mW", "first"),
         )
@@ -160,7 +160,7 @@ def recommend(table) -> list[dict]:
                 "p_detect": float(pick.p_detect),
                 "p_low": float(pick.p_low),
                 "frames": int(pick.frames),
-                "detected": int(pick.detected),
+                "successes": int(pick.successes),
                 "core_saturation": float(pick.core_saturation),
             }
         )
@@ -173,7 +173,7 @@ def recommendation_text(rec: dict) -> str:
         return f"no setting tried keeps P ≥ 0.95 with cores < 50 % clipped (0 of {rec['configurations']})"
     return (
         f"{rec['led_current_mA']:g} mA behind {rec['diffuser']}: {rec['led_power_mW']:.2g} mW per LED, "
-        f"{rec['side_power_mW']:.2g} mW for the side; {rec['detected']} of {rec['frames']} frames detected "
+        f"{rec['side_power_mW']:.2g} mW for the side; {rec['successes']} of {rec['frames']} frames correct "
         f"(lowest Wilson 95 % bound {rec['p_low']:.2f}), cores {100 * rec['core_saturation']:.0f} % clipped; "
         f"{rec['window']} in the window"
     )
@@ -205,7 +205,7 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
     rec = pd.DataFrame(summary["recommended"])
     if "diffuser" in rec:
         rec = rec.assign(
-            correct=[f"{d:.0f} of {n:.0f}" if n == n else "–" for d, n in zip(rec.detected, rec.frames, strict=True)]
+            correct=[f"{d:.0f} of {n:.0f}" if n == n else "–" for d, n in zip(rec.successes, rec.frames, strict=True)]
         )
         rep.table(
             rec[
@@ -255,7 +255,7 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
             diffuser_text(bool(f), int(n), str(c))
             for f, n, c in zip(table.foam, table.paper_sheets, table.paper_colour, strict=True)
         ],
-        correct=[f"{d} of {n}" for d, n in zip(table.detected, table.frames, strict=True)],
+        correct=[f"{d} of {n}" for d, n in zip(table.successes, table.frames, strict=True)],
         in_window=["yes" if w else "no" for w in table.in_window],
     )
     rep.table(
@@ -332,7 +332,7 @@ def _heat_maps(plt, g):
             i = labels.index(diffuser_text(bool(row.foam), int(row.paper_sheets), str(row.paper_colour)))
             j = currents.index(row.led_current_mA)
             grid[i, j] = getattr(row, metric)
-            text[i, j] = f"{row.detected}/{row.frames}" if metric == "p_detect" else f"{grid[i, j]:.2f}"
+            text[i, j] = f"{row.successes}/{row.frames}" if metric == "p_detect" else f"{grid[i, j]:.2f}"
             window[i, j] = bool(row.in_window)
         im = ax.imshow(grid, vmin=0, vmax=1, cmap=cmap, aspect="auto")
         ax.set_xticks(range(len(currents)), [f"{c:g}" for c in currents], fontsize=10)

@@ -267,8 +267,8 @@ def answers(summaries: Mapping[str, dict], diffusers: Mapping[str, str] | None =
             rec[key] = "; ".join(rec.get(f"{key}_lines", []))
         records.append(rec)
     rule = RULE.format(yaw=f"{yaw:g}°" if yaw is not None else "–")
-    by_camera = {r["camera"]: r for r in records}
-    headline = _headline(decision, per_camera, seps, by_camera, diffusers or {}, yaws)
+    led = {cam: _led_records(recommended, cam) for cam in per_camera}
+    headline = _headline(decision, per_camera, seps, led, diffusers or {}, yaws)
     return {
         "headline": headline,
         "rule": rule,
@@ -379,28 +379,22 @@ def _limit_lines(chosen: list[dict | None], yaws: list[float]) -> list[str]:
 
 
 def _led_lines(recommended: pd.DataFrame, cam: str) -> tuple[list[str], float | None]:
-    """The recommended drive and diffuser per side, as lines (the last names the study), and
-    the first side's drive, mA."""
-    if recommended.empty or cam not in set(recommended.camera):
+    """The recommended drive and diffuser per side in words
+    (:func:`studies.catalog.brightness_diffuser.recommendation_text`; the last line names the
+    study), and the first side with a window's drive, mA (None: no window, or not run)."""
+    records = _led_records(recommended, cam)
+    if not records:
         return ["not in brightness-diffuser"], None
-    lines = []
-    current = None
-    sides = []
-    for r in recommended[recommended.camera == cam].to_dict("records"):
-        sides.append(str(r["side"]))
-        if r.get("window") == "empty":
-            lines.append(
-                f"{r['side']}: none of the drives and diffusers tried keeps P ≥ 0.95 with cores < 50 % clipped"
-            )
-            continue
-        current = r["led_current_mA"] if current is None else current
-        lines += [
-            f"{r['side']}: {r['led_current_mA']:g} mA behind {r['diffuser']}",
-            f"{r['led_power_mW']:.2g} mW per LED ({r['side_power_mW']:.2g} mW for the side)",
-            f"{r['detected']} of {r['frames']} frames detected; {r['window']} in the window",
-        ]
-    lines.append(f"brightness-diffuser: {_sides_text(sides)}")
-    return lines, current
+    lines = [f"{r['side']}: {brightness_diffuser.recommendation_text(r)}" for r in records.values()]
+    current = next((float(r["led_current_mA"]) for r in records.values() if r.get("window") != "empty"), None)
+    return [*lines, f"brightness-diffuser: {_sides_text(list(records))}"], current
+
+
+def _led_records(recommended: pd.DataFrame, cam: str) -> dict[str, dict]:
+    """brightness-diffuser's ``recommended`` records of a camera, by side."""
+    if recommended.empty:
+        return {}
+    return {str(r["side"]): r for r in recommended[recommended.camera == cam].to_dict("records")}
 
 
 def _sides_text(sides: Sequence[str]) -> str:
@@ -489,19 +483,20 @@ def _reach_text(recs: Mapping[float, dict], yaws: list[float]) -> str:
     return " and ".join(parts)
 
 
-def _setting_text(recs: Mapping[float, dict], diffuser: str | None, rec: Mapping) -> str:
+def _setting_text(recs: Mapping[float, dict], diffuser: str | None, led: Mapping[str, dict]) -> str:
     """The LED setting the far limits were measured at ("at 2 mA behind foam + 1 matched sheet on the
-    red side"), and brightness-diffuser's window for the camera when it differs."""
+    red side"), and brightness-diffuser's window for the camera's side (``led``: its records by
+    side) when it differs."""
     r = next(iter(recs.values()))
     side = str(r["side"])
     text = f"at {r['led_current_mA']:g} mA" + (f" behind {diffuser}" if diffuser else "") + f" on the {side} side"
-    lines = rec.get("led_setting_lines", [])
-    if rec.get("led_current_mA") is None:
-        if not lines or lines[0].startswith("not in"):
-            return text
+    w = led.get(side)
+    if w is None:
+        return text
+    if w.get("window") == "empty":
         return text + " (brightness-diffuser found no drive and diffuser it tried that keeps P ≥ 0.95 unclipped)"
-    window = lines[0].removeprefix(f"{side}: ")
-    power = lines[1].split(" (")[0]
+    power = f"{w['led_power_mW']:.2g} mW per LED"
+    window = f"{w['led_current_mA']:g} mA behind {w['diffuser']}"
     if diffuser and window == f"{r['led_current_mA']:g} mA behind {diffuser}":
         return text + f", {power}, brightness-diffuser's window too"
     return text + f"; brightness-diffuser's window for it is {window} ({power})"
@@ -511,7 +506,7 @@ def _headline(
     decision: Decision,
     per_camera: Mapping[str, Mapping[float, dict]],
     seps: Mapping[str, tuple[dict | None, float | None]],
-    records: Mapping[str, dict],
+    led: Mapping[str, Mapping[str, dict]],
     diffusers: Mapping[str, str],
     yaws: list[float],
 ) -> str:
@@ -539,7 +534,7 @@ def _headline(
     cam = decision.camera
     assert cam is not None
     recs = per_camera[cam]
-    setting = _setting_text(recs, diffusers.get(cam), records[cam])
+    setting = _setting_text(recs, diffusers.get(cam), led.get(cam, {}))
     line = f"Use {cam}: it works {_reach_text(recs, yaws)}, with the LED {setting}."
     if decision.yaw_deg != max(yaws):
         line += f" (No camera works at {max(yaws):g}°; decided at {yaw}.)"

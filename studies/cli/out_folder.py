@@ -248,7 +248,7 @@ def _claim(out: Path, before: set[str], command: str, legacy_name: str) -> None:
             log.info("out: %s was written by an earlier beacon-sim; resuming it as '%s'", out, command)
     record = {"command": command, "format": 1}
     try:
-        atomic_write_bytes(marker, (json.dumps(record, indent=2) + "\n").encode())
+        atomic_write_bytes(marker, (json.dumps(record, indent=2, allow_nan=False) + "\n").encode())
     except OSError as exc:
         raise UsageError(f"out: cannot write {marker} ({exc.strerror or exc})") from None
 

@@ -297,3 +297,12 @@ def test_detect_with_a_calibration_undoes_lens_distortion():
     plain = detect(img, Intrinsics.from_geometry(g)).to_dict()
     print(f"\nrange error with calibration {out['range_m'] - 2.0:+.5f} m, without {plain['range_m'] - 2.0:+.5f} m")
     assert abs(plain["range_m"] - 2.0) > 5 * abs(out["range_m"] - 2.0)
+
+
+def test_a_calibration_file_is_standard_json_or_not_written(tmp_path):
+    """RFC 8259 has no NaN: a finite calibration is written as strict JSON, a non-finite one is refused."""
+    k = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    ok = Calibration(k, np.zeros(5), 640, 480, 0.2, 10).save(tmp_path / "ok.json")
+    json.loads(ok.read_text(), parse_constant=lambda name: pytest.fail(f"bare {name}"))
+    with pytest.raises(ValueError, match="JSON compliant"):
+        Calibration(k, np.zeros(5), 640, 480, float("nan"), 10).save(tmp_path / "nan.json")

@@ -157,8 +157,10 @@ def _summaries(b_30=(13.0, 10.6, 14.4), seps=(61.0, 113.0)) -> dict:
                 "diffuser": "foam + 3 white sheets",
                 "led_power_mW": 0.77,
                 "side_power_mW": 3.9,
-                "detected": 2,
+                "successes": 2,
                 "frames": 2,
+                "p_low": 0.34,
+                "core_saturation": 0.0,
             }
         ],
         "configurations": [{"frames": 2}],

@@ -251,7 +251,7 @@ def test_brightness_diffuser_recommends_the_known_setting_with_its_power(main_jo
     for cam in (T6, C270):  # the bare LED clips its cores, 20 mA fails: foam + 3 sheets at 2 mA is the window
         assert (rec[cam]["led_current_mA"], rec[cam]["diffuser"]) == (2.0, "foam + 3 white sheets")
         assert rec[cam]["led_power_mW"] == pytest.approx(power)
-        assert (rec[cam]["detected"], rec[cam]["frames"], rec[cam]["window"]) == (2, 2, "1 of 4 configurations")
+        assert (rec[cam]["successes"], rec[cam]["frames"], rec[cam]["window"]) == (2, 2, "1 of 4 configurations")
     text = _text(main_job / "brightness-diffuser" / "report.html")
     assert f"2 mA behind foam + 3 white sheets: {power:.2g} mW per LED" in text
 
