@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
-from scenes.diffusers import paper
 from scenes.led import led_for_side
 from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.scenario import Scenario, ScenarioError
@@ -67,7 +66,7 @@ def leak_emitter(scenario: Scenario, side: str) -> dict | None:
     ``None`` where the wall is opaque."""
     leak = housing_leak(
         scenario.design,
-        led_for_side(side),
+        scenario.led_for(side),
         scenario.housing,
         scenario.diffuser,
         side,
@@ -84,7 +83,7 @@ def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
     Bare LEDs: radiance 1/A along the normal × cos^(m−1)θ (one W·sr⁻¹ on axis). With
     diffusers: the near-field exit radiance L(r, θ) per W·sr⁻¹ as a texture.
     """
-    design, led, config = scenario.design, led_for_side(side), scenario.diffuser
+    design, led, config = scenario.design, scenario.led_for(side), scenario.diffuser
     group = f"led:{side}"
     if config.is_bare:
         return bare_face_emitter(design, side), design.lit_face_reflectance
@@ -99,7 +98,7 @@ def face_emitter(scenario: Scenario, side: str) -> tuple[dict, float]:
         "profile": np.round(emission.profile_per_m2, 9).tolist(),
     }
     if config.paper_sheets:
-        reflectance = float(paper(config.paper_colour_for(side)).at(emission.reference_wavelength_nm)[0])
+        reflectance = float(config.sheet(side).at(emission.reference_wavelength_nm)[0])
     else:
         reflectance = 0.8  # foam face: white polyethylene (assumed, as the foam's albedo suggests)
     return emitter, reflectance

@@ -119,11 +119,16 @@ def _paper_data() -> dict:
     return values
 
 
-@lru_cache(maxsize=8)
-def paper(colour: str) -> Paper:
-    """The sheet optics for ``colour`` (``white``, ``red``, ``green``, ``blue``, ``yellow``)."""
+@lru_cache(maxsize=32)
+def paper(colour: str, sheet_transmittance: float | None = None) -> Paper:
+    """The sheet optics for ``colour`` (``white``, ``red``, ``green``, ``blue``, ``yellow``).
+
+    ``sheet_transmittance``: the white sheet's T₁ instead of the data file's (the sheet
+    reflectance stays the file's; T₁ + R₁ ≤ 1, :meth:`DiffuserConfig.validate`).
+    """
     p = _paper_data()["paper"]
-    r1, t1 = p["sheet_reflectance"], p["sheet_transmittance"]
+    r1 = p["sheet_reflectance"]
+    t1 = p["sheet_transmittance"] if sheet_transmittance is None else sheet_transmittance
     sx, kx_white = km_invert(r1, t1)
     n = spectra.WAVELENGTHS_NM.size
     if colour == "white":
@@ -167,11 +172,14 @@ class Foam:
         return self.reduced_optical_depth / ((1.0 - self.anisotropy) * self.thickness_m)
 
 
-@lru_cache(maxsize=1)
-def default_foam() -> Foam:
-    """The foam of ``scenes/data/diffusers.toml``."""
+@lru_cache(maxsize=32)
+def default_foam(reduced_optical_depth: float | None = None, thickness_mm: float | None = None) -> Foam:
+    """The foam of ``scenes/data/diffusers.toml``, with its reduced optical depth τ' and thickness
+    (mm) replaced where given."""
     f = _paper_data()["foam"]
-    return Foam(f["thickness_mm"] * 1e-3, f["reduced_optical_depth"], f["anisotropy"], f["single_scattering_albedo"])
+    tau = f["reduced_optical_depth"] if reduced_optical_depth is None else reduced_optical_depth
+    thickness_mm = f["thickness_mm"] if thickness_mm is None else thickness_mm
+    return Foam(thickness_mm * 1e-3, tau, f["anisotropy"], f["single_scattering_albedo"])
 
 
 def foam_transmittance_diffusion(reduced_optical_depth: float, albedo: float = 1.0) -> float:
@@ -208,11 +216,28 @@ def foam_optical_depth_from_transmittance(transmittance: float, albedo: float = 
 # -- a marker's diffuser configuration -------------------------------------------------
 @dataclass(frozen=True)
 class DiffuserConfig:
-    """Foam on/off, number of paper sheets and their colour (``matched`` = side colour)."""
+    """Foam on/off, number of paper sheets and their colour (``matched`` = side colour), and the
+    materials' unknowns where a scenario replaces the data file's values
+    (:mod:`scenes.data_overrides`; None: the file's).
+
+    Attributes
+    ----------
+    foam, paper_sheets, paper_colour
+        The stack in front of every LED.
+    foam_reduced_optical_depth
+        τ' of the foam disc (dimensionless).
+    foam_thickness_mm
+        Thickness of the foam disc, mm.
+    sheet_transmittance
+        Diffuse transmittance T₁ of one white sheet (a dyed sheet keeps its dye on top).
+    """
 
     foam: bool = False
     paper_sheets: int = 0
     paper_colour: str = "white"
+    foam_reduced_optical_depth: float | None = None
+    foam_thickness_mm: float | None = None
+    sheet_transmittance: float | None = None
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the bad field."""
@@ -222,6 +247,21 @@ class DiffuserConfig:
             raise ValueError(f"paper_sheets: expected an integer 0-{MAX_PAPER_SHEETS}, got {self.paper_sheets!r}")
         if self.paper_colour not in PAPER_COLOURS:
             raise ValueError(f"paper_colour: expected one of {', '.join(PAPER_COLOURS)}, got {self.paper_colour!r}")
+        r1 = _paper_data()["paper"]["sheet_reflectance"]
+        if self.sheet_transmittance is not None and not 0.0 < self.sheet_transmittance < 1.0 - r1 - 1e-9:
+            raise ValueError(
+                f"data.diffusers.paper.sheet_transmittance: expected 0 < T < 1 - R = {1.0 - r1:.2f} (R: the sheet "
+                "reflectance of scenes/data/diffusers.toml; a sheet absorbs some light), "
+                f"got {self.sheet_transmittance!r}"
+            )
+
+    def foam_optics(self) -> Foam:
+        """The foam disc's optics."""
+        return default_foam(self.foam_reduced_optical_depth, self.foam_thickness_mm)
+
+    def sheet(self, side: str) -> Paper:
+        """One sheet's optics on a side."""
+        return paper(self.paper_colour_for(side), self.sheet_transmittance)
 
     @property
     def is_bare(self) -> bool:

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from scenes import spectra
 from scenes.beacon import BeaconDesign
-from scenes.diffusers import DiffuserConfig, default_foam, paper, stack
+from scenes.diffusers import DiffuserConfig, stack
 from scenes.led import LED
 from scenes.mitsuba_variant import select_variant
 from scenes.render_cache import RenderCache, content_key
@@ -141,7 +141,7 @@ def exit_spectral_factor(config: DiffuserConfig, side: str, led: LED) -> tuple[N
     """Spectral factor T_N(λ)/T_N(λ_ref) of the sheets and the reference wavelength, nm."""
     if config.paper_sheets == 0:
         return np.ones_like(spectra.WAVELENGTHS_NM), float(led.peak_wavelength_nm)
-    sheet = paper(config.paper_colour_for(side))
+    sheet = config.sheet(side)
     _, t_n = stack(sheet.reflectance, sheet.transmittance, config.paper_sheets)
     weight = led.spectral_shape * t_n
     if spectra.integrate_nm(weight) <= 0:
@@ -192,7 +192,7 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
     ]
     _, lam_ref = exit_spectral_factor(config, side, led)
     if config.paper_sheets:
-        r1, t1 = paper(config.paper_colour_for(side)).at(lam_ref)
+        r1, t1 = config.sheet(side).at(lam_ref)
         for k in range(config.paper_sheets):
             # sheets fill the bore (their edges meet the wall; no gap for light to bypass them)
             shapes.append(disk_shape(np.array([0.0, 0.0, -k * SHEET_PITCH_M]), up, r_face, "sheet"))
@@ -200,7 +200,7 @@ def near_field_spec(design: BeaconDesign, led: LED, housing: str, config: Diffus
         r1 = t1 = 0.0
     medium = None
     if config.foam:
-        foam = default_foam()
+        foam = config.foam_optics()
         z0, z1 = FOAM_TOP_M - foam.thickness_m, FOAM_TOP_M
         medium = {"sigma_t_per_m": foam.sigma_t_per_m, "albedo": foam.single_scattering_albedo, "g": foam.anisotropy}
         shapes += [

@@ -35,7 +35,6 @@ from scenes.assemble import (
     to_mitsuba,
 )
 from scenes.direct_view import FaceDisc, face_discs, render_direct, render_scattered, set_film_crop, shape_groups
-from scenes.led import led_for_side
 from scenes.mitsuba_variant import select_variant
 from scenes.near_field import exit_spectral_factor
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
@@ -165,7 +164,7 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, un
         shape = env.spectral_shape()
     else:
         side = group.split(":", 1)[1]
-        led = led_for_side(side)
+        led = scenario.led_for(side)
         # the unit render holds radiance per W·sr⁻¹ of LED intensity at the reference
         # wavelength; the diffusers' spectral factor turns it into the band integral
         spectral_factor, _ = exit_spectral_factor(scenario.diffuser, side, led)
@@ -181,7 +180,17 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, un
 def with_led_current(radiance: SpectralRadiance, current_mA: float) -> SpectralRadiance:
     """The same render with the LEDs driven at ``current_mA`` (light transport is linear:
     the unit renders are rescaled in memory; no scene is built and nothing is read)."""
-    scenario = Scenario.from_dict({**radiance.scenario, "led_current_mA": current_mA})
+    return with_emission(radiance, Scenario.from_dict({**radiance.scenario, "led_current_mA": current_mA}))
+
+
+def with_emission(radiance: SpectralRadiance, scenario: Scenario) -> SpectralRadiance:
+    """The same render with the LEDs' light of ``scenario``: its drive and its LED intensity bins
+    (the :data:`scenes.data_overrides.GAIN` overrides). Exact, as light transport is linear: the
+    unit renders are rescaled in memory. ``scenario`` must differ from the render's only in those
+    (``ValueError`` otherwise)."""
+    rendered = Scenario.from_dict(radiance.scenario)
+    if rendered.without_gains() != scenario.without_gains():
+        raise ValueError("scenario: differs from the render's in more than the LEDs' drive and intensity")
     components = tuple(
         _scaled_component(scenario, c.name, c.unit_image, c.unit_key) if c.unit_image is not None else c
         for c in radiance.components
@@ -198,7 +207,7 @@ def side_current_mA(scenario: Scenario, side: str) -> float:
     """
     if side == scenario.side:
         return scenario.current_mA
-    led = led_for_side(side)
+    led = scenario.led_for(side)
     fraction = scenario.current_mA / scenario.led.reference_current_mA
     return min(led.reference_current_mA * fraction, led.max_current_mA)
 

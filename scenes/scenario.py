@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scenes.beacon import HOUSING_FINISHES, BeaconDesign, beacon_design, target_to_beacon
+from scenes.data_overrides import GAIN, check_data_overrides, data_path
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
@@ -168,6 +169,10 @@ class Scenario:
         colour (``white``, ``matched`` = each side's own colour, or a fixed colour).
     render
         Render settings.
+    data
+        Values of the scene data files replaced for this scenario, ``(path, value)`` pairs
+        sorted by path (a mapping is accepted): the LEDs' intensity bin, the foam, the paper,
+        the lit face (:data:`scenes.data_overrides.DATA_PATHS`); empty: the files' values.
     """
 
     beacon: str = "v2"
@@ -183,8 +188,14 @@ class Scenario:
     paper_sheets: int = 0
     paper_colour: str = "white"
     render: RenderSettings = field(default_factory=RenderSettings)
+    data: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.data, tuple) or any(not isinstance(x, tuple) for x in self.data):
+            try:  # a mapping or JSON's lists: the canonical sorted tuple of (path, value)
+                object.__setattr__(self, "data", check_data_overrides(self.data, beacon=str(self.beacon)))
+            except (TypeError, ValueError) as exc:
+                raise ScenarioError(str(exc)) from None
         self.validate()
 
     # -- validation -------------------------------------------------------------------
@@ -218,23 +229,52 @@ class Scenario:
                 led.check_current(float(self.led_current_mA))
             except (TypeError, ValueError) as exc:
                 raise ScenarioError(str(exc)) from None
+        try:
+            if check_data_overrides(self.data, beacon=self.beacon) != self.data:
+                raise ValueError("data: expected (path, value) pairs sorted by path")
+        except ValueError as exc:
+            raise ScenarioError(str(exc)) from None
         self.render.validate()
 
     # -- derived ----------------------------------------------------------------------
     @property
     def diffuser(self) -> DiffuserConfig:
-        """The diffuser configuration of every marker."""
-        return DiffuserConfig(self.foam, self.paper_sheets, self.paper_colour)
+        """The diffuser configuration of every marker (with the foam and paper of :attr:`data`)."""
+        return DiffuserConfig(
+            self.foam,
+            self.paper_sheets,
+            self.paper_colour,
+            foam_reduced_optical_depth=self._data("diffusers.foam.reduced_optical_depth"),
+            foam_thickness_mm=self._data("diffusers.foam.thickness_mm"),
+            sheet_transmittance=self._data("diffusers.paper.sheet_transmittance"),
+        )
 
     @property
     def design(self) -> BeaconDesign:
-        """The beacon design."""
-        return beacon_design(self.beacon)
+        """The beacon design (with the lit face of :attr:`data`)."""
+        design = beacon_design(self.beacon)
+        lit_face_mm = self._data(f"beacons.{self.beacon}.lit_face_diameter_mm")
+        return design if lit_face_mm is None else dataclasses.replace(design, lit_face_diameter_m=lit_face_mm * 1e-3)
 
     @property
     def led(self) -> LED:
         """The LED of the visible side."""
-        return led_for_side(self.side)
+        return self.led_for(self.side)
+
+    def led_for(self, side: str) -> LED:
+        """The LED of a side (with the intensity bin of :attr:`data`)."""
+        led = led_for_side(side)
+        cd = self._data(f"leds.{side}.luminous_intensity_cd")
+        return led if cd is None else dataclasses.replace(led, luminous_intensity_cd=cd)
+
+    def _data(self, path: str) -> float | None:
+        return dict(self.data).get(path)
+
+    def without_gains(self) -> Scenario:
+        """This scenario at the datasheet drive and without the overrides that only scale the LEDs'
+        light (:data:`scenes.data_overrides.GAIN`): what a unit render depends on."""
+        kept = tuple((p, v) for p, v in self.data if data_path(p)[0].acts != GAIN)
+        return dataclasses.replace(self, led_current_mA=None, data=kept)
 
     @property
     def geometry(self) -> CameraGeometry:
@@ -274,8 +314,13 @@ class Scenario:
 
     # -- identity ---------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """Plain-data form (JSON-able)."""
-        return dataclasses.asdict(self)
+        """Plain-data form (JSON-able); ``data`` as a mapping, left out when empty (so scenarios
+        without overrides keep the keys they had before it existed)."""
+        out = dataclasses.asdict(self)
+        out.pop("data")
+        if self.data:
+            out["data"] = dict(self.data)
+        return out
 
     @classmethod
     def from_dict(cls, data: dict) -> Scenario:

@@ -22,7 +22,7 @@ V2 were separate builds), so the drive is searched per beacon and side (``led_dr
 … from the registry's ``led_drive``). Both beacons are built as the studies build them:
 foam + one sheet of paper (its colour an unknown).
 
-The search draws ``samples`` points of the settable unknowns (scrambled Sobol', one seed);
+The search draws ``samples`` points of the unknowns (scrambled Sobol', one seed);
 each point is scored on every condition and side with ``seeds`` noise seeds. Outputs:
 
 ``samples.csv``   one row per point: the values, ``<condition>_<side>`` successes,
@@ -51,7 +51,7 @@ from studies.engine import strict_json
 from studies.engine.scoring import detection_success
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tasks import StudyOptions, frame_tasks
-from studies.engine.unknowns import Unknown, apply, fixed, load_unknowns, sample, settable
+from studies.engine.unknowns import Unknown, apply, fixed, load_unknowns, sample
 
 WEBCAMS = ("logitech-c270", "spedal-920")
 CONDITIONS: dict[str, dict] = {
@@ -78,7 +78,7 @@ TUNING_WEBCAM = Unknown(
     "150 mm; the study had the C270 and the Spedal 920 and does not say which",
 )
 HELD: tuple[str, ...] = ()
-"""Unknowns held at their nominal in the search (none: every settable unknown varies)."""
+"""Unknowns held at their nominal in the search (none: every unknown varies, the data-file ones included)."""
 RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
 
 
@@ -88,9 +88,9 @@ def drive_name(beacon: str, side: str) -> str:
 
 
 def search_space(unknowns: dict[str, Unknown] | None = None) -> dict[str, Unknown]:
-    """The settable unknowns of the conditions' cameras, with one drive per beacon and side,
+    """The unknowns of the conditions' cameras, with one drive per beacon and side,
     :data:`TUNING_WEBCAM`, and :data:`HELD` fixed."""
-    unknowns = settable(load_unknowns() if unknowns is None else unknowns)
+    unknowns = load_unknowns() if unknowns is None else unknowns
     cameras = {c["scenario"]["camera"] for c in CONDITIONS.values()} | set(WEBCAMS)
     space = {n: u for n, u in unknowns.items() if not u.cameras or cameras & set(u.cameras)}
     drive = space.pop("led_drive")

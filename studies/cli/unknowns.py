@@ -6,13 +6,12 @@ from __future__ import annotations
 from studies.cli import options as opt
 from studies.cli.common import print_table
 from studies.engine import strict_json
-from studies.engine.unknowns import load_unknowns, settable
+from studies.engine.unknowns import load_unknowns
 
 
 def unknown_rows() -> list[dict]:
-    """Every unknown as plain data: name, target, kind, range, nominal, unit, cameras, per-task, reason."""
+    """Every unknown as plain data: name, target, kind, range, nominal, unit, cameras, how it acts, reason."""
     registry = load_unknowns()
-    per_task = settable(registry)
     return [
         {
             "name": u.name,
@@ -25,7 +24,7 @@ def unknown_rows() -> list[dict]:
             "nominal": u.nominal,
             "unit": u.unit,
             "cameras": list(u.cameras),
-            "per_task": u.name in per_task,
+            "acts": u.acts,
             "provenance": u.provenance,
         }
         for u in registry.values()
@@ -39,8 +38,9 @@ def unknowns(json_out: opt.Json = False) -> None:
         print(strict_json.dumps(rows, indent=2, ensure_ascii=False))
         return
     print_table(
-        "Unknowns (studies/data/unknowns.toml; per task: a frame task can set it, else only its nominal)",
-        ("name", "target", "range", "nominal", "cameras", "per task", "source / assumed"),
+        "Unknowns (studies/data/unknowns.toml; every one settable per frame task. Acts: gain = rescales a "
+        "render exactly, render = changes the scene rendered, camera = the camera model)",
+        ("name", "target", "range", "nominal", "cameras", "acts", "source / assumed"),
         [
             (
                 r["name"],
@@ -48,7 +48,7 @@ def unknowns(json_out: opt.Json = False) -> None:
                 r["range"],
                 _text(r["nominal"]),
                 ", ".join(r["cameras"]) or "all",
-                "yes" if r["per_task"] else "no",
+                r["acts"],
                 r["provenance"],
             )
             for r in rows

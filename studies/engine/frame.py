@@ -62,7 +62,7 @@ from pipeline.thesis_pose import QUEST_WEIGHTS
 from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.background import render_background
 from scenes.radiance import SpectralRadiance
-from scenes.render import render, with_led_current
+from scenes.render import render, with_emission
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
@@ -331,7 +331,7 @@ def frame_inputs(task: dict):
     scenario = frame_scenario(task)
     camera = camera_with_overrides(load_camera(scenario.camera), task.get("camera_overrides"))
     needs_background = camera.exposure.mode == "auto" or bool(task.get("full_frame"))
-    key = json.dumps({**scenario.to_dict(), "led_current_mA": None, "background": needs_background}, sort_keys=True)
+    key = json.dumps({**scenario.without_gains().to_dict(), "background": needs_background}, sort_keys=True)
     held = _RENDERS.pop(key, None)
     if held is None:
         cache = RenderCache()
@@ -339,7 +339,7 @@ def frame_inputs(task: dict):
     _RENDERS[key] = held  # most recently used last
     while len(_RENDERS) > 4:
         _RENDERS.pop(next(iter(_RENDERS)))
-    radiance, background = (None if r is None else with_led_current(r, scenario.current_mA) for r in held)
+    radiance, background = (None if r is None else with_emission(r, scenario) for r in held)
     if task.get("align_px") and not task.get("full_frame"):  # a whole frame is aligned by itself
         radiance = aligned_radiance(radiance, int(task["align_px"]))
     return scenario, camera, radiance, background

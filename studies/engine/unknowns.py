@@ -9,8 +9,10 @@ into a frame task (:func:`apply`):
 ``scenario.<field>``                      → ``task["scenario"][field]``
 ``camera.<lens|sensor|isp|exposure>.<f>`` → ``task["camera_overrides"]["<group>.<f>"]``
                                             (applied by :func:`camera_models.camera.with_overrides`)
-``data.<file>.<key path>``                → a value of ``scenes/data/<file>.toml`` the frame path cannot
-                                            set per task yet: only its nominal (the file's value) is accepted
+``data.<file>.<key path>``                → ``task["scenario"]["data"]["<file>.<key path>"]``: a value of
+                                            ``scenes/data/<file>.toml`` replaced for the frame
+                                            (:data:`scenes.data_overrides.DATA_PATHS` lists those a scenario
+                                            can replace; a ``data.beacons.<name>.`` one applies to that beacon)
 
 Values are keyed by the unknown's name. All functions are pure; the same seed gives the
 same samples.
@@ -31,6 +33,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import loguniform, qmc, uniform
 
+from scenes.data_overrides import DATA_PATHS, GAIN, RENDER, data_path
 from scenes.scenario import Scenario
 from scenes.sourced import DATA_DIR as SCENE_DATA_DIR
 from scenes.sourced import DataFileError, load_sourced
@@ -90,6 +93,16 @@ class Unknown:
     def path(self) -> str:
         """The target without its namespace (``led_current_mA``, ``lens.f_number``, ``leds.red.…``)."""
         return self.target.split(".", 1)[1]
+
+    @property
+    def acts(self) -> str:
+        """How it acts on a frame: ``gain`` (rescales the render exactly: the LED drive and intensity
+        bins), ``render`` (changes the scene rendered) or ``camera`` (the camera model)."""
+        if self.namespace == "camera":
+            return "camera"
+        if self.namespace == "data":
+            return data_path(self.path)[0].acts
+        return GAIN if self.path == "led_current_mA" else RENDER
 
     def contains(self, value: Any) -> bool:
         """Whether ``value`` is a value this unknown may take."""
@@ -191,7 +204,7 @@ def _check_target(target: Any, at: str) -> None:
         raise DataFileError(f"{at}: expected 'scenario.<field>', 'camera.<group>.<field>' or 'data.<file>.<key>'")
     namespace, path = target.split(".", 1)
     if namespace == "scenario":
-        fields = [f.name for f in dataclasses.fields(Scenario) if f.name != "render"]
+        fields = [f.name for f in dataclasses.fields(Scenario) if f.name not in ("render", "data")]
         if path not in fields:
             raise DataFileError(f"{at}: {path!r} is not a Scenario field (expected one of {', '.join(fields)})")
     elif namespace == "camera":
@@ -203,6 +216,13 @@ def _check_target(target: Any, at: str) -> None:
             data_file_value(target)
         except (KeyError, TypeError, DataFileError):
             raise DataFileError(f"{at}: {target!r} is not a value of a scenes/data file") from None
+        try:
+            data_path(path)
+        except ValueError:
+            raise DataFileError(
+                f"{at}: {target!r} is not a value a scenario can replace (expected data.<one of "
+                f"{', '.join(DATA_PATHS)}>)"
+            ) from None
     else:
         raise DataFileError(f"{at}: namespace must be 'scenario', 'camera' or 'data', got {namespace!r}")
 
@@ -309,16 +329,19 @@ def apply(task: dict, values: dict[str, Any], unknowns: dict[str, Unknown] | Non
     """A new frame task (see :mod:`studies.engine.frame`) with ``values`` (name → value) set.
 
     Scenario targets go into ``task["scenario"]``, camera targets into
-    ``task["camera_overrides"]`` (``"lens.f_number"`` → value). Unknowns scoped to other
-    cameras than the task's are skipped. A ``data.`` target cannot be set per task yet: its
-    nominal (the data file's value) is accepted and changes nothing, any other value raises
-    ``ValueError``. ``task`` itself is left unchanged.
+    ``task["camera_overrides"]`` (``"lens.f_number"`` → value), data targets into
+    ``task["scenario"]["data"]`` (``"leds.red.luminous_intensity_cd"`` → value) unless the value is
+    the data file's own (then the task stays as a nominal one, with the key it had). Unknowns
+    scoped to other cameras than the task's, and ``data.beacons.<name>.`` ones of another beacon,
+    are skipped. ``task`` itself is left unchanged.
     """
     unknowns = load_unknowns() if unknowns is None else unknowns
     out = copy.deepcopy(task)
     scenario = out.setdefault("scenario", {})
     camera = scenario.get("camera", Scenario.__dataclass_fields__["camera"].default)
+    beacon = scenario.get("beacon", Scenario.__dataclass_fields__["beacon"].default)
     overrides = dict(out.get("camera_overrides") or {})
+    data = dict(scenario.get("data") or {})
     for name, value in values.items():
         if name not in unknowns:
             raise ValueError(f"unknowns: no unknown {name!r} (expected one of {', '.join(unknowns)})")
@@ -330,16 +353,16 @@ def apply(task: dict, values: dict[str, Any], unknowns: dict[str, Unknown] | Non
             scenario[u.path] = value
         elif u.namespace == "camera":
             overrides[u.path] = value
-        elif not _same(value, data_file_value(u.target)):
-            raise ValueError(
-                f"unknowns: {name} ({u.target}) is a data-file value the frame path cannot set per task yet; "
-                f"hold it at {data_file_value(u.target)!r} (fixed/nominal) or leave it out, got {value!r}"
-            )
+        elif u.path.startswith("beacons.") and u.path.split(".")[1] != beacon:
+            continue
+        elif _same(value, data_file_value(u.target)):
+            data.pop(u.path, None)
+        else:
+            data[u.path] = float(value)
     if overrides:
         out["camera_overrides"] = overrides
+    if data:
+        scenario["data"] = dict(sorted(data.items()))
+    else:
+        scenario.pop("data", None)
     return out
-
-
-def settable(unknowns: dict[str, Unknown]) -> dict[str, Unknown]:
-    """The unknowns a frame task can take today (scenario and camera targets, not ``data.`` ones)."""
-    return {name: u for name, u in unknowns.items() if u.namespace != "data"}

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from camera_models.camera import load_camera, with_overrides
-from scenes.scenario import Scenario
+from scenes.scenario import RenderSettings, Scenario
 from scenes.sourced import DataFileError
-from studies.engine.frame import capture_frame, frame_inputs
+from studies.engine.frame import camera_with_overrides, capture_frame, frame_inputs
 from studies.engine.unknowns import (
     KINDS,
     apply,
@@ -22,7 +22,6 @@ from studies.engine.unknowns import (
     load_unknowns,
     nominal,
     sample,
-    settable,
 )
 
 TINY = {"spp": 1, "oversampling": 1, "near_field_spp": 16, "crop": "target", "seed": 0}
@@ -117,9 +116,12 @@ def test_apply_sets_scenario_and_camera_fields_and_leaves_the_task_alone(registr
     assert out["render"] == task["render"] and out["seed"] == 0
     Scenario(**out["scenario"])  # still a valid scenario
     assert "camera_overrides" not in apply(task, {"led_drive": 1.0}, registry)
-    with pytest.raises(ValueError, match=r"lit_face_diameter \(data\.beacons\.v2\.lit_face_diameter_mm\)"):
-        apply(task, {"lit_face_diameter": 14.0}, registry)
-    assert set(settable(registry)) == {n for n, u in registry.items() if not u.target.startswith("data.")}
+    # a data value off the file's goes into the scenario's data (a V1 entry does not touch a V2 task)
+    data = apply(task, {"lit_face_diameter": 14.0, "lit_face_diameter_v1": 11.0, "led_intensity_red": 6.0}, registry)
+    assert data["scenario"]["data"] == {"beacons.v2.lit_face_diameter_mm": 14.0, "leds.red.luminous_intensity_cd": 6.0}
+    assert Scenario(**data["scenario"]).design.lit_face_diameter_m == pytest.approx(0.014)
+    assert {u.acts for u in registry.values()} == {"gain", "render", "camera"}
+    assert registry["led_intensity_red"].acts == "gain" and registry["foam_optical_depth"].acts == "render"
     webcam = apply({"scenario": {"camera": "logitech-c270"}}, {"webcam_max_exposure": 0.1}, registry)
     assert webcam["camera_overrides"] == {"exposure.max_exposure_s": 0.1}
 
@@ -158,6 +160,9 @@ def test_bad_data_file_gives_one_line_naming_file_and_field(tmp_path):
         'source = "a reason long enough to count"\n': r"a\.low: a loguniform range needs low > 0",
         '[a]\ntarget = "data.leds.red.luminous_intensity_cd"\nkind = "fixed"\nnominal = 9.0\n'
         'source = "a reason long enough to count"\n': r"a\.nominal: 9\.0 differs from the data file's 5\.1",
+        '[a]\ntarget = "data.beacons.v2.arm_length_mm"\nkind = "fixed"\nnominal = 70.0\n'
+        'source = "a reason long enough to count"\n': r"a\.target: 'data\.beacons\.v2\.arm_length_mm' is not a value a "
+        "scenario can replace",
     }
     for text, message in cases.items():
         path = tmp_path / "bad.toml"
@@ -191,6 +196,46 @@ def test_cli_lists_the_unknowns():
     run = [sys.executable, "-m", "studies.cli", "unknowns"]
     listed = json.loads(subprocess.run([*run, "--json"], capture_output=True, text=True, check=True).stdout)
     assert [r["name"] for r in listed] == list(load_unknowns())
-    assert {"target", "range", "nominal", "provenance", "per_task"} <= set(listed[0])
+    assert {"target", "range", "nominal", "provenance", "acts"} <= set(listed[0])
     table = subprocess.run(run, capture_output=True, text=True, check=True).stdout.splitlines()
     assert table[0].split("\t")[:3] == ["name", "target", "range"] and len(table) == len(listed) + 1
+
+
+def _other_value(u):
+    """A value of ``u`` away from its nominal: another choice, or the bound farther from it."""
+    if u.kind == "choice":
+        return next(c for c in u.choices if c != u.nominal)
+    return u.high if u.high - u.nominal >= u.nominal - u.low else u.low
+
+
+def _walk(obj, path: str):
+    for key in path.split("."):
+        obj = getattr(obj, key)
+    return obj
+
+
+def test_every_unknown_is_settable_per_task_and_changes_what_it_acts_on(registry):
+    """Each registry entry, set away from its nominal on a task of a camera (and beacon) it applies to:
+    a gain changes the scenario's light but not the scene a render is made of; a render entry changes
+    the scene description (so the render key); a camera entry changes that field of the camera model."""
+    from scenes.assemble import scene_spec
+
+    seen = set()
+    for u in registry.values():
+        camera = u.cameras[0] if u.cameras else "canon-t6-18mm"
+        beacon = u.path.split(".")[1] if u.path.startswith("beacons.") else "v2"
+        scenario = {"camera": camera, "beacon": beacon, "range_m": 3.0, "foam": True, "paper_sheets": 1}
+        task = {"scenario": {**scenario, "paper_colour": "matched"}, "render": dict(TINY), "seed": 0}
+        out = apply(task, {u.name: _other_value(u)}, registry)
+        assert out != task, u.name
+        before, after = (Scenario(**t["scenario"], render=RenderSettings(**TINY)) for t in (task, out))
+        if u.acts == "camera":
+            changed = camera_with_overrides(load_camera(camera), out["camera_overrides"])
+            assert _walk(changed, u.path) == _other_value(u) != _walk(load_camera(camera), u.path), u.name
+        elif u.acts == "gain":
+            assert before != after and before.without_gains() == after.without_gains(), u.name
+            assert scene_spec(before) == scene_spec(after), u.name
+        else:
+            assert scene_spec(before) != scene_spec(after), u.name
+        seen.add(u.acts)
+    assert seen == {"gain", "render", "camera"}
