@@ -182,6 +182,16 @@ class ISPModel:
     tone_contrast: float = 0.0  # S-curve weight of "picture-standard", 0-1
     sharpening_amount: float = 0.0  # unsharp-mask amount on luma (0 = off)
     sharpening_sigma_px: float = 1.0  # unsharp-mask Gaussian sigma, px
+    # (raw saturation − black) / (the level the ISP maps to white − black), in (0.5, 1]: 1, the ISP's
+    # white point is where the raw clips; below 1 a clipped core stays under white until white
+    # balance lifts some channels past it (dcraw(1): pink highlights when the saturation level is
+    # set too high). Not a body setting: an unknown (studies/data/unknowns.toml)
+    raw_saturation_ratio: float = 1.0
+
+    def white_level_DN(self, sensor: SensorModel) -> float:
+        """The raw level this ISP maps to white, DN: the sensor's clip level over
+        :attr:`raw_saturation_ratio` (above black)."""
+        return sensor.black_level_DN + (sensor.white_level_DN - sensor.black_level_DN) / self.raw_saturation_ratio
 
 
 @dataclass(frozen=True)

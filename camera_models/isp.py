@@ -170,6 +170,8 @@ def check_isp_options(camera: Camera) -> None:
         raise ValueError(f"isp.tone_contrast: expected 0-1 (a monotonic curve), got {isp.tone_contrast!r}")
     if isp.sharpening_amount < 0.0 or isp.sharpening_sigma_px <= 0.0:
         raise ValueError("isp.sharpening_amount: expected amount >= 0 and sigma > 0")
+    if not 0.5 < isp.raw_saturation_ratio <= 1.0:
+        raise ValueError(f"isp.raw_saturation_ratio: expected 0.5 < ratio <= 1, got {isp.raw_saturation_ratio!r}")
 
 
 def process(
@@ -207,7 +209,7 @@ def process(
     check_isp_options(camera)
     if isp.noise_reduction != "none" and (analog_gain is None or not np.isfinite(analog_gain) or analog_gain <= 0):
         raise ValueError(f"analog_gain: noise reduction needs the frame's analog gain (> 0), got {analog_gain!r}")
-    bgr16 = _demosaic_bgr16(_raw_to_16bit(s.black_level_DN, s.white_level_DN)[raw], s.cfa, x0, y0)
+    bgr16 = _demosaic_bgr16(_raw_to_16bit(s.black_level_DN, isp.white_level_DN(s))[raw], s.cfa, x0, y0)
     gains = white_balance_gains(raw, camera, x0, y0)
     matrix = camera_to_srgb_matrix(camera)
     # white balance and colour matrix as one transform; the few pixels that white balance takes
@@ -244,7 +246,7 @@ def white_balance_gains(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0
             site = raw[dy::2, dx::2]
             sums[ch[dy, dx]] += float(site.sum(dtype=np.float64))
             counts[ch[dy, dx]] += site.size
-    means = (sums / np.maximum(counts, 1) - s.black_level_DN) / (s.white_level_DN - s.black_level_DN)
+    means = (sums / np.maximum(counts, 1) - s.black_level_DN) / (isp.white_level_DN(s) - s.black_level_DN)
     return auto_white_balance_gains(means, camera)
 
 

@@ -29,7 +29,7 @@ def reference_rgb8(raw: np.ndarray, camera, x0: int = 0, y0: int = 0, gains: np.
     g = (white_balance_gains(raw, camera, x0, y0) if gains is None else gains).astype(np.float32)
     matrix_t = camera_to_srgb_matrix(camera).T.astype(np.float32)
     out = np.empty((*raw.shape, 3), np.uint8)
-    scale = np.float32(1.0 / (s.white_level_DN - s.black_level_DN))
+    scale = np.float32(1.0 / (isp.white_level_DN(s) - s.black_level_DN))
     linear = (raw.astype(np.float32) - np.float32(s.black_level_DN)) * scale
     rgb_all = demosaic(linear, s.cfa, x0, y0)
     del linear

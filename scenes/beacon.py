@@ -76,7 +76,7 @@ class BeaconDesign:
 
     def __post_init__(self) -> None:
         for finish, t in self.housing_transmittance.items():
-            if not 0.0 <= t <= 1.0 - self.housing_reflectance[finish]:
+            if not 0.0 <= t <= 1.0 - self.housing_reflectance[finish] + 1e-12:  # (float rounding of 1 - R)
                 raise ValueError(f"beacon {self.name}: housing_transmittance.{finish}: expected 0 <= T <= 1 - R")
 
     @property

@@ -60,6 +60,8 @@ class DataPath:
     high: float
     unit: str
     why: str
+    closed_low: bool = False
+    """Whether ``low`` itself is allowed (an opaque wall's transmittance 0), else only values above it."""
 
 
 DATA_PATHS: dict[str, DataPath] = {
@@ -108,6 +110,15 @@ DATA_PATHS: dict[str, DataPath] = {
             "the bore must hold the LED's 5 mm lens (scenes/data/leds.toml); at 30 mm the faces of V1's markers, "
             "45 mm apart, would nearly touch",
         ),
+        DataPath(
+            "beacons.{beacon}.housing_transmittance.{finish}",
+            RENDER,
+            0.0,
+            1.0,
+            "",
+            "0 (opaque) to 1 - the finish's reflectance (checked by scenes.beacon.BeaconDesign)",
+            closed_low=True,
+        ),
     )
 }
 """The settable paths (:class:`DataPath` by pattern)."""
@@ -119,6 +130,7 @@ def data_path(path: str) -> tuple[DataPath, dict[str, str]]:
     >>> data_path("leds.green.luminous_intensity_cd")[1]
     {'colour': 'green'}
     """
+    from scenes.beacon import HOUSING_FINISHES
     from scenes.led import SIDE_COLOURS
 
     parts = path.split(".") if isinstance(path, str) else []
@@ -132,6 +144,8 @@ def data_path(path: str) -> tuple[DataPath, dict[str, str]]:
                 bound["colour"] = p
             elif w == "{beacon}" and p.isidentifier():
                 bound["beacon"] = p
+            elif w == "{finish}" and p in HOUSING_FINISHES:
+                bound["finish"] = p
             elif w != p:
                 break
         else:
@@ -160,10 +174,12 @@ def check_data_overrides(overrides: Mapping[str, Any] | tuple, *, beacon: str) -
             raise ValueError(f"data.{path}: names beacon {bound['beacon']!r}, but the scenario's beacon is {beacon!r}")
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ValueError(f"data.{path}: expected a finite number, got {value!r}")
-        if not spec.low < float(value) <= spec.high:  # an open low end: a value must be positive
+        above = spec.low <= float(value) if spec.closed_low else spec.low < float(value)
+        if not (above and float(value) <= spec.high):
             unit = f" {spec.unit}" if spec.unit else ""
+            low = "<=" if spec.closed_low else "<"
             raise ValueError(
-                f"data.{path}: expected {spec.low:g} < value <= {spec.high:g}{unit} ({spec.why}), got {value!r}"
+                f"data.{path}: expected {spec.low:g} {low} value <= {spec.high:g}{unit} ({spec.why}), got {value!r}"
             )
         if path in out:
             raise ValueError(f"data.{path}: given more than once")

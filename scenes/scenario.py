@@ -172,7 +172,8 @@ class Scenario:
     data
         Values of the scene data files replaced for this scenario, ``(path, value)`` pairs
         sorted by path (a mapping is accepted): the LEDs' intensity bin, the foam, the paper,
-        the lit face (:data:`scenes.data_overrides.DATA_PATHS`); empty: the files' values.
+        the lit face, the housing walls' leak (:data:`scenes.data_overrides.DATA_PATHS`); empty:
+        the files' values.
     """
 
     beacon: str = "v2"
@@ -234,6 +235,10 @@ class Scenario:
                 raise ValueError("data: expected (path, value) pairs sorted by path")
         except ValueError as exc:
             raise ScenarioError(str(exc)) from None
+        try:
+            self.design  # noqa: B018  (the overrides' own checks: e.g. a leak beyond 1 - the housing's reflectance)
+        except ValueError as exc:
+            raise ScenarioError(f"data: {exc}") from None
         self.render.validate()
 
     # -- derived ----------------------------------------------------------------------
@@ -251,10 +256,19 @@ class Scenario:
 
     @property
     def design(self) -> BeaconDesign:
-        """The beacon design (with the lit face of :attr:`data`)."""
+        """The beacon design (with the lit face and housing leaks of :attr:`data`)."""
         design = beacon_design(self.beacon)
-        lit_face_mm = self._data(f"beacons.{self.beacon}.lit_face_diameter_mm")
-        return design if lit_face_mm is None else dataclasses.replace(design, lit_face_diameter_m=lit_face_mm * 1e-3)
+        prefix = f"beacons.{self.beacon}."
+        mine = {p.removeprefix(prefix): v for p, v in self.data if p.startswith(prefix)}
+        if not mine:
+            return design
+        changes: dict = {}
+        if "lit_face_diameter_mm" in mine:
+            changes["lit_face_diameter_m"] = mine["lit_face_diameter_mm"] * 1e-3
+        leaks = {k.split(".", 1)[1]: v for k, v in mine.items() if k.startswith("housing_transmittance.")}
+        if leaks:
+            changes["housing_transmittance"] = {**design.housing_transmittance, **leaks}
+        return dataclasses.replace(design, **changes)
 
     @property
     def led(self) -> LED:

@@ -247,3 +247,24 @@ def test_body_processing_options_are_valid(body):
     for name, pp in isp["processing_options"].items():
         kw = {k: tuple(v) if isinstance(v, list) else v for k, v in pp.items()}
         check_isp_options(_with(cam, processing=name, **kw))
+
+
+def test_a_raw_clip_below_the_isps_white_point_turns_a_clipped_core_pale_violet():
+    """Every site of the core clipped in the raw. With the ISP's white point at the raw clip (ratio 1)
+    the core is white; with the raw clipping 8 % below it, the clipped sites reach only 0.92 of white,
+    white balance lifts R and B (gains > 1/0.92) back to white but leaves G at 0.92: a pale
+    magenta-violet core (OpenCV hue near 150 of 180), as dcraw warns for a saturation level set too high."""
+    cam = load_camera("canon-t6-18mm")
+    gains = daylight_gains(cam)
+    assert gains[0] > 1 / 0.92 and gains[2] > 1 / 0.92 and gains[1] == 1.0
+    raw = np.full((16, 16), cam.sensor.white_level_DN, np.uint16)
+    assert np.all(process(raw, cam).rgb8[8, 8] >= 250)
+    low = _with(cam, raw_saturation_ratio=0.92)
+    core = process(raw, low).rgb8[8, 8]
+    h, s_, v = _hsv(core)
+    assert core[1] < core[0] == core[2] == 255 and h == 150 and 10 <= s_ <= 20 and v == 255
+    seeded = _seeded_raw(low)  # the 16-bit path still matches the float path
+    worst, share = _code_differences(process(seeded, low).rgb8, reference_rgb8(seeded, low))
+    assert worst <= 1 and share <= SAME_CODES
+    with pytest.raises(ValueError, match=r"isp\.raw_saturation_ratio: expected 0\.5 < ratio <= 1"):
+        check_isp_options(_with(cam, raw_saturation_ratio=1.1))

@@ -224,7 +224,15 @@ def test_every_unknown_is_settable_per_task_and_changes_what_it_acts_on(registry
     for u in registry.values():
         camera = u.cameras[0] if u.cameras else "canon-t6-18mm"
         beacon = u.path.split(".")[1] if u.path.startswith("beacons.") else "v2"
-        scenario = {"camera": camera, "beacon": beacon, "range_m": 3.0, "foam": True, "paper_sheets": 1}
+        housing = "white" if u.path.endswith("housing_transmittance.white") else "black"  # the finish it is of
+        scenario = {
+            "camera": camera,
+            "beacon": beacon,
+            "range_m": 3.0,
+            "foam": True,
+            "paper_sheets": 1,
+            "housing": housing,
+        }
         task = {"scenario": {**scenario, "paper_colour": "matched"}, "render": dict(TINY), "seed": 0}
         out = apply(task, {u.name: _other_value(u)}, registry)
         assert out != task, u.name
