@@ -187,6 +187,9 @@ class ISPModel:
     # balance lifts some channels past it (dcraw(1): pink highlights when the saturation level is
     # set too high). Not a body setting: an unknown (studies/data/unknowns.toml)
     raw_saturation_ratio: float = 1.0
+    # where camera_to_xyz comes from: "from-ssf" (fitted to the sensor's sensitivities, refitted when
+    # they are swapped: with_ssf) or "published" (the body's own matrix, e.g. a DNG ColorMatrix: kept)
+    colour_matrix: str = "from-ssf"
 
     def white_level_DN(self, sensor: SensorModel) -> float:
         """The raw level this ISP maps to white, DN: the sensor's clip level over
@@ -510,6 +513,7 @@ def _isp(i: Fields, sensor: SensorModel) -> ISPModel:
         white_balance=i.text("white_balance", choices=("daylight", "auto")),
         awb_max_gain_ratio=i.number("awb_max_gain_ratio", minimum=1.0, default=1.0),
         camera_to_xyz=camera_to_xyz,
+        colour_matrix="published" if i.has("xyz_to_camera") else "from-ssf",
         tone_curve=chosen["tone_curve"],
         jpeg_quality=i.number("jpeg_quality", integer=True, minimum=1, maximum=100),
         chroma_subsampling=i.text("chroma_subsampling", choices=CHROMA_SUBSAMPLINGS),
@@ -564,8 +568,37 @@ def with_overrides(camera: Camera, overrides: dict[str, object]) -> Camera:
     if not overrides:
         return camera
     for path, value in overrides.items():
-        camera = _replace_path(camera, str(path).split("."), value, str(path))
+        derived = DERIVED_OVERRIDES.get(str(path))
+        camera = derived(camera, value) if derived else _replace_path(camera, str(path).split("."), value, str(path))
     return camera
+
+
+def builtin_ssf_names() -> list[str]:
+    """The spectral-sensitivity CSVs shipped in ``camera_models/data/ssf`` (file names)."""
+    return sorted(p.name for p in SSF_DIR.glob("*.csv"))
+
+
+def with_ssf(camera: Camera, name: object) -> Camera:
+    """``camera`` with its sensor's spectral sensitivities replaced by a built-in curve (a file of
+    ``camera_models/data/ssf``, all energy responses from pbrt-v4), scaled to the same peak QE.
+
+    A colour matrix fitted to the sensitivities (``isp.colour_matrix = "from-ssf"``) is fitted
+    again, as the body's firmware would be fitted to its own sensor; a published one (a DNG
+    matrix) is the body's firmware and is kept. The camera override ``sensor.ssf_csv`` calls this.
+    """
+    names = builtin_ssf_names()
+    if name not in names:
+        raise ValueError(f"camera override 'sensor.ssf_csv': expected one of {', '.join(names)}, got {name!r}")
+    qe = load_ssf_qe(SSF_DIR / str(name), float(camera.sensor.qe_rgb.max()), energy_response=True)
+    sensor = replace(camera.sensor, qe_rgb=qe)
+    isp = camera.isp
+    if isp.colour_matrix == "from-ssf":
+        isp = replace(isp, camera_to_xyz=camera_to_xyz_from_ssf(qe))
+    return replace(camera, sensor=sensor, isp=isp)
+
+
+DERIVED_OVERRIDES = {"sensor.ssf_csv": with_ssf}
+"""Camera overrides that are not one field: the value rebuilds the fields derived from it."""
 
 
 def _replace_path(obj, keys: list[str], value: object, path: str):

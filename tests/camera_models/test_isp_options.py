@@ -268,3 +268,26 @@ def test_a_raw_clip_below_the_isps_white_point_turns_a_clipped_core_pale_violet(
     assert worst <= 1 and share <= SAME_CODES
     with pytest.raises(ValueError, match=r"isp\.raw_saturation_ratio: expected 0\.5 < ratio <= 1"):
         check_isp_options(_with(cam, raw_saturation_ratio=1.1))
+
+
+def test_a_borrowed_sensitivity_swaps_the_curve_and_refits_only_a_fitted_matrix():
+    """``sensor.ssf_csv``: the new curve at the same peak QE; a webcam's matrix (fitted to its curve) is
+    fitted again and maps white to white, the T6's published DNG matrix is the body's firmware and stays."""
+    from camera_models.camera import builtin_ssf_names, with_overrides
+    from camera_models.isp import camera_to_srgb_matrix
+
+    assert {"canon_eos_100d.csv", "canon_eos_m.csv", "nikon_d850.csv"} <= set(builtin_ssf_names())
+    c270 = load_camera("logitech-c270")
+    other = with_overrides(c270, {"sensor.ssf_csv": "nikon_d850.csv"})
+    assert other.sensor.qe_rgb.max() == pytest.approx(c270.sensor.qe_rgb.max(), rel=1e-12)
+    assert not np.allclose(other.sensor.qe_rgb, c270.sensor.qe_rgb)
+    assert not np.allclose(other.isp.camera_to_xyz, c270.isp.camera_to_xyz)
+    np.testing.assert_allclose(camera_to_srgb_matrix(other) @ np.ones(3), 1.0, rtol=1e-9)  # white stays white
+    same = with_overrides(c270, {"sensor.ssf_csv": "sony_ilce_6400.csv"})  # its own curve: the same camera
+    np.testing.assert_array_equal(same.sensor.qe_rgb, c270.sensor.qe_rgb)
+    t6 = load_camera("canon-t6-18mm")
+    assert t6.isp.colour_matrix == "published"
+    swapped = with_overrides(t6, {"sensor.ssf_csv": "canon_eos_200d.csv"})
+    np.testing.assert_array_equal(swapped.isp.camera_to_xyz, t6.isp.camera_to_xyz)
+    with pytest.raises(ValueError, match=r"camera override 'sensor\.ssf_csv': expected one of .*got 'nope\.csv'"):
+        with_overrides(t6, {"sensor.ssf_csv": "nope.csv"})
