@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from pipeline.angles import Intrinsics, cv_to_study, pinhole_rays_cv
 from pipeline.crlb import PoseBound, bound_from_covariance, pose_covariance, project_points
 from pipeline.frames import Pose
+from pipeline.pnp import solve_pnp
 from pipeline.thesis_pose import thesis_pose_from_vectors
 from scenes.beacon import BeaconDesign
 
@@ -62,7 +63,8 @@ def _check_uv(uv) -> NDArray[np.float64]:
 
 
 def pnp_pose(uv, design: BeaconDesign, intrinsics: Intrinsics, sigma_px: float = 0.3) -> PoseEstimate:
-    """SQPnP then Levenberg–Marquardt on markers 1..5.
+    """SQPnP (EPnP where SQPnP refuses a distant target: :func:`pipeline.pnp.solve_pnp`) then
+    Levenberg–Marquardt on markers 1..5.
 
     Parameters
     ----------
@@ -78,14 +80,10 @@ def pnp_pose(uv, design: BeaconDesign, intrinsics: Intrinsics, sigma_px: float =
     uv = _check_uv(uv)
     obj = design.marker_positions_m()
     k = intrinsics.matrix()
-    try:
-        ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
-        if ok:
-            rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec, criteria=_LM_CRITERIA)
-    except cv2.error:  # SQPnP asserts on degenerate (near-coincident) points
-        ok = False
-    if not ok:
-        raise ValueError("markers: SQPnP found no pose (degenerate marker positions)")
+    solved = solve_pnp(obj, uv, k, criteria=_LM_CRITERIA)
+    if solved is None:
+        raise ValueError("markers: PnP found no pose (degenerate marker positions)")
+    rvec, tvec = solved
     pose = Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3))
     return _estimate(pose, uv, obj, intrinsics, sigma_px, "sqpnp+lm")
 

@@ -48,6 +48,7 @@ from pipeline.components import components
 from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, to_float
 from pipeline.markers import Blob, TrackResult, cross_candidates_many
+from pipeline.pnp import solve_pnp
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.led import SIDE_COLOURS
 
@@ -339,13 +340,10 @@ def _plausible(pts: NDArray[np.float64]) -> bool:
 
 def _fit(uv: NDArray[np.float64], design: BeaconDesign, k: NDArray[np.float64]) -> float:
     obj = design.marker_positions_m()
-    try:
-        ok, rvec, tvec = cv2.solvePnP(obj, uv, k, None, flags=cv2.SOLVEPNP_SQPNP)
-        if not ok:
-            return float("inf")
-        rvec, tvec = cv2.solvePnPRefineLM(obj, uv, k, None, rvec, tvec)
-    except cv2.error:  # degenerate point sets (SQPnP asserts on near-coincident points)
+    solved = solve_pnp(obj, uv, k)
+    if solved is None:  # degenerate point sets
         return float("inf")
+    rvec, tvec = solved
     rot = cv2.Rodrigues(rvec)[0]
     cam_t = -rot.T @ tvec.reshape(3)
     if tvec[2, 0] <= 0 or cam_t[0] <= 0:  # target behind the camera, or seen from behind

@@ -66,7 +66,7 @@ from scenes.render import render, with_emission
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 
-FRAME_VERSION = 7
+FRAME_VERSION = 8
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.
 4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
@@ -79,7 +79,10 @@ streams, the same distributions).
 noise-aware threshold (issue 24).
 7: the 16-bit ISP re-encodes values next to a code step from their exact linear value (its
 rounding had moved dark codes up more often than down: +1.6 % false blobs on a C270 dark frame),
-and the sensor's noise from a seed per frame (:func:`noise_seed`), not per seed index (issue 24)."""
+and the sensor's noise from a seed per frame (:func:`noise_seed`), not per seed index (issue 24).
+8: PnP falls back to EPnP where OpenCV's SQPnP refuses a distant target (:mod:`pipeline.pnp`; V2
+beyond ~19 m, V1 beyond ~12 m had failed as "no fit"); scenarios may carry data-file overrides
+(``Scenario.data``) and cameras the ISP's white point and borrowed sensitivities (issue 25)."""
 
 
 def frame_scenario(task: dict):
