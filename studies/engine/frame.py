@@ -1,33 +1,10 @@
 """One simulated frame, end to end: render → camera → saved JPEG → detectors → result rows.
 
-A *frame task* is a plain dict (JSON-able, so it can be hashed, stored and sent to a
-worker process or a Dask cluster):
-
-``scenario``   keyword arguments of :class:`scenes.scenario.Scenario` (without ``render``)
-``render``     keyword arguments of :class:`scenes.scenario.RenderSettings`
-``seed``       sensor-noise seed index: the sensor's noise is drawn from :func:`noise_seed`, which
-               mixes it with everything that makes the frame, so no two frames share a noise field
-``exposure``   optional manual settings ``{"iso": .., "exposure_s": .., "f_number": ..}`` (else the camera's)
-``trackers``, ``estimators``  which detectors to run (default both of each)
-``thesis_hsv_variants``  optional label → HSV boxes for the study's tracker (None: its own)
-``tags``       optional fields copied into every row (e.g. the test's name)
-``full_frame`` capture and detect on the whole frame instead of the rendered crop (study tasks
-               have it by default: :attr:`studies.engine.tasks.StudyOptions.frame`); the rest of
-               the frame is the low-resolution background render, with the sensor's noise,
-               ISP and JPEG on every pixel, so the detectors see the false blobs the camera makes
-``noise``      optional, default True; False captures the noiseless frame (no temporal or fixed-
-               pattern sensor noise: :func:`camera_models.capture.capture`), for checks
-``reference_camera``  optional, default False; True captures with the reference sensor and ISP the
-               fast path replaced (same distributions, other numbers), for equivalence tests
-``quest_weights``  optional ``tuned`` (default, the study's) or ``equal`` QUEST weights
-``rectification``  optional ``{"alpha": 0 or 1}``: undistort before detecting, as the study's
-               rectification did (ideal calibration: :mod:`camera_models.rectification`)
-``align_px``   optional: pad the rendered crop with zero radiance so its origin and size are
-               multiples of this (JPEG blocks and the study's 50 % resize then group the
-               pixels as in the full frame); ignored with ``full_frame`` (aligned by itself)
-``camera_overrides``  optional: camera-model fields to replace, ``{"lens.f_number": 5.6}``
-               (:func:`camera_models.camera.with_overrides`; e.g. from :func:`studies.engine.unknowns.apply`);
-               rows then carry them as ``camera.<path>`` columns
+A *frame task* is a :class:`studies.engine.frame_task.FrameTask` (its fields are documented there):
+the scenario (with the scene data files' values it replaces), render settings, a noise-seed index
+and options (manual exposure, whole frame, detectors, camera overrides). The functions here take
+one or its plain form (a JSON-able dict, as stored and sent to workers), which they check with
+:meth:`FrameTask.coerce`.
 
 :func:`capture_frame` is the one render → capture path: it returns what the camera saved
 (:class:`CapturedFrame`), which experiments measure directly (e.g. core saturation).
@@ -65,6 +42,7 @@ from scenes.radiance import SpectralRadiance
 from scenes.render import render, with_emission
 from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
+from studies.engine.frame_task import FrameTask
 
 FRAME_VERSION = 8
 """Bump when a change alters the rows a task produces (invalidates stored results).
@@ -85,9 +63,10 @@ beyond ~19 m, V1 beyond ~12 m had failed as "no fit"); scenarios may carry data-
 (``Scenario.data``) and cameras the ISP's white point and borrowed sensitivities (issue 25)."""
 
 
-def frame_scenario(task: dict):
+def frame_scenario(task: FrameTask | dict) -> Scenario:
     """The :class:`Scenario` of a task (validates it)."""
-    return Scenario(**task["scenario"], render=RenderSettings(**task.get("render", {})))
+    task = FrameTask.coerce(task)
+    return Scenario(**task.scenario, render=RenderSettings(**(task.render or {})))
 
 
 @dataclass(frozen=True)
@@ -119,7 +98,7 @@ NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px",
 """The task fields that make a frame's mean image, mixed into its noise seed (:func:`noise_seed`)."""
 
 
-def noise_seed(task: dict) -> int:
+def noise_seed(task: FrameTask | dict) -> int:
     """The sensor-noise seed of a frame task (a 63-bit integer): its ``seed`` hashed (SHA-256)
     with the fields that make the frame (:data:`NOISE_SEED_FIELDS`).
 
@@ -133,15 +112,17 @@ def noise_seed(task: dict) -> int:
     >>> noise_seed(t) == noise_seed(dict(t)), noise_seed(t) == noise_seed({**t, "seed": 1})
     (True, False)
     """
-    what = [int(task["seed"]), {k: task.get(k) for k in NOISE_SEED_FIELDS}]
+    plain = task.to_dict() if isinstance(task, FrameTask) else task
+    what = [int(plain["seed"]), {k: plain.get(k) for k in NOISE_SEED_FIELDS}]
     digest = hashlib.sha256(json.dumps(what, sort_keys=True, default=repr).encode()).digest()
     return int.from_bytes(digest[:8], "little") >> 1
 
 
-def capture_frame(task: dict) -> CapturedFrame:
+def capture_frame(task: FrameTask | dict) -> CapturedFrame:
     """Render (or reuse the render of) a frame task and capture it with its camera."""
+    task = FrameTask.coerce(task)
     scenario, camera, radiance, background = frame_inputs(task)
-    settings = task.get("exposure") or {}
+    settings = task.exposure or {}
     exposure = None
     if settings.get("iso") is not None or settings.get("exposure_s") is not None:
         exposure = manual_exposure(camera, settings.get("exposure_s"), settings.get("iso"))
@@ -152,17 +133,18 @@ def capture_frame(task: dict) -> CapturedFrame:
         background,
         exposure,
         f_number=settings.get("f_number"),
-        full=bool(task.get("full_frame")),
-        noise=bool(task.get("noise", True)),
-        reference=bool(task.get("reference_camera")),
+        full=task.is_full_frame,
+        noise=task.with_noise,
+        reference=bool(task.reference_camera),
     )
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)
 
 
-def simulate_frame(task: dict) -> list[dict]:
+def simulate_frame(task: FrameTask | dict) -> list[dict]:
     """Simulate one frame task (see module docstring) and score every detector on it."""
     t0 = time.perf_counter()
+    task = FrameTask.coerce(task)
     frame = capture_frame(task)
     scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
     truth_uv = marker_pixels(camera, scenario)
@@ -175,13 +157,13 @@ def simulate_frame(task: dict) -> list[dict]:
     saturation = marker_core_saturation(cap, camera, scenario)
     colours = marker_colours(image_bgr, truth_uv, saturation, (cap.x0, cap.y0))
     base = {
-        **{k: v for k, v in task["scenario"].items()},
-        **task.get("tags", {}),
-        **{f"camera.{path}": value for path, value in (task.get("camera_overrides") or {}).items()},
-        "seed": int(task["seed"]),
-        "frame": "full" if task.get("full_frame") else "crop",
-        "nominal_range_m": task.get("nominal", {}).get("range_m", scenario.range_m),
-        "nominal_yaw_deg": task.get("nominal", {}).get("yaw_deg", scenario.yaw_deg),
+        **{k: v for k, v in task.scenario.items()},
+        **(task.tags or {}),
+        **{f"camera.{path}": value for path, value in (task.camera_overrides or {}).items()},
+        "seed": task.seed,
+        "frame": "full" if task.is_full_frame else "crop",
+        "nominal_range_m": (task.nominal or {}).get("range_m", scenario.range_m),
+        "nominal_yaw_deg": (task.nominal or {}).get("yaw_deg", scenario.yaw_deg),
         "exposure_s": cap.exposure.exposure_s,
         "analog_gain": cap.exposure.analog_gain,
         "iso": cap.exposure.iso,
@@ -198,7 +180,7 @@ def simulate_frame(task: dict) -> list[dict]:
     rows = []
     for tracker, label, settings in _detectors(task):
         tracked: dict = {}  # the tracker runs once; each estimator reuses its result
-        for estimator in task.get("estimators", tuple(ESTIMATORS)):
+        for estimator in tuple(ESTIMATORS) if task.estimators is None else task.estimators:
             ev = evaluate_detection(
                 image_bgr,
                 intrinsics,
@@ -236,32 +218,30 @@ def simulate_frame(task: dict) -> list[dict]:
     return [{**row, "frame_s": seconds} for row in rows]
 
 
-def _detect_options(task: dict, camera: Camera) -> dict:
+def _detect_options(task: FrameTask, camera: Camera) -> dict:
     """Detector options a task asks for: the study's weight experiment (``quest_weights``:
     ``tuned`` or ``equal``) and rectification (``rectification``: ``{"alpha": 0 or 1}``, with
     the lens's own distortion in OpenCV's model as the calibration: an ideal calibration)."""
     options = {}
-    if task.get("quest_weights"):
-        if task["quest_weights"] not in QUEST_WEIGHTS:
-            raise ValueError(
-                f"quest_weights: expected one of {', '.join(QUEST_WEIGHTS)}, got {task['quest_weights']!r}"
-            )
-        options["quest_weights"] = QUEST_WEIGHTS[task["quest_weights"]]
-    if task.get("rectification") is not None:
+    if task.quest_weights:
+        if task.quest_weights not in QUEST_WEIGHTS:
+            raise ValueError(f"quest_weights: expected one of {', '.join(QUEST_WEIGHTS)}, got {task.quest_weights!r}")
+        options["quest_weights"] = QUEST_WEIGHTS[task.quest_weights]
+    if task.rectification is not None:
         fit = opencv_distortion(camera)
         options["calibration"] = Calibration(
             fit.camera_matrix, fit.dist_coeffs, fit.width_px, fit.height_px, fit.max_error_px, 0
         )
-        options["alpha"] = float(task["rectification"]["alpha"])
+        options["alpha"] = float(task.rectification["alpha"])
     return options
 
 
-def _detectors(task: dict):
+def _detectors(task: FrameTask):
     """(tracker, threshold label, thesis settings) to run: the study's tracker once per
     HSV threshold variant in ``task["thesis_hsv_variants"]`` (label → per-colour boxes,
     None for the study's own numbers), the best tracker once."""
-    variants = task.get("thesis_hsv_variants") or {"study": None}
-    for tracker in task.get("trackers", tuple(TRACKERS)):
+    variants = task.thesis_hsv_variants or {"study": None}
+    for tracker in tuple(TRACKERS) if task.trackers is None else task.trackers:
         if tracker != "thesis":
             yield tracker, "", None
             continue
@@ -322,7 +302,7 @@ def _num(x) -> float:
     return float(x) if x is not None and np.isfinite(x) else math.nan
 
 
-def frame_inputs(task: dict):
+def frame_inputs(task: FrameTask | dict):
     """What a frame task's capture needs: (scenario, camera, render of the crop,
     low-resolution full-frame background or None).
 
@@ -331,9 +311,10 @@ def frame_inputs(task: dict):
     at unit LED scale, so the frames of one render (drives, seeds) rescale them instead
     of reading the cache again — light transport is linear, the bytes are the same.
     """
+    task = FrameTask.coerce(task)
     scenario = frame_scenario(task)
-    camera = camera_with_overrides(load_camera(scenario.camera), task.get("camera_overrides"))
-    needs_background = camera.exposure.mode == "auto" or bool(task.get("full_frame"))
+    camera = camera_with_overrides(load_camera(scenario.camera), task.camera_overrides)
+    needs_background = camera.exposure.mode == "auto" or task.is_full_frame
     key = json.dumps({**scenario.without_gains().to_dict(), "background": needs_background}, sort_keys=True)
     held = _RENDERS.pop(key, None)
     if held is None:
@@ -343,8 +324,8 @@ def frame_inputs(task: dict):
     while len(_RENDERS) > 4:
         _RENDERS.pop(next(iter(_RENDERS)))
     radiance, background = (None if r is None else with_emission(r, scenario) for r in held)
-    if task.get("align_px") and not task.get("full_frame"):  # a whole frame is aligned by itself
-        radiance = aligned_radiance(radiance, int(task["align_px"]))
+    if task.align_px and not task.is_full_frame:  # a whole frame is aligned by itself
+        radiance = aligned_radiance(radiance, int(task.align_px))
     return scenario, camera, radiance, background
 
 
@@ -391,14 +372,15 @@ _RENDERS: dict[str, tuple] = {}
 """Renders (crop, background) of the most recently used geometries in this process."""
 
 
-def render_batch_key(task: dict) -> str:
+def render_batch_key(task: FrameTask | dict) -> str:
     """Label of the frames that share a task's render (everything but drive and seed);
     the runner sends them to one worker together (:func:`studies.engine.runner.run_tasks`)."""
-    scenario = {k: v for k, v in task["scenario"].items() if k != "led_current_mA"}
-    return json.dumps([scenario, task.get("render", {}), bool(task.get("full_frame"))], sort_keys=True)
+    task = FrameTask.coerce(task)
+    scenario = {k: v for k, v in task.scenario.items() if k != "led_current_mA"}
+    return json.dumps([scenario, task.render or {}, task.is_full_frame], sort_keys=True)
 
 
-def target_crop_png(task: dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:
+def target_crop_png(task: FrameTask | dict, half_width_m: float = 0.12, size_px: int = 200) -> bytes:
     """The saved image around the target (±``half_width_m`` at the marker plane), scaled
     to ``size_px`` with nearest-neighbour so camera pixels stay visible; PNG bytes."""
     frame = capture_frame(task)

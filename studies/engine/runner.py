@@ -379,7 +379,8 @@ def run_tasks(
     Parameters
     ----------
     tasks
-        JSON-able task dicts.
+        JSON-able task dicts, or records with a ``to_dict()`` that gives one
+        (:class:`studies.engine.frame_task.FrameTask`).
     out_dir
         Study output directory; finished tasks go to ``out_dir/tasks``.
     function
@@ -412,6 +413,7 @@ def run_tasks(
     store = ResultStore(Path(out_dir) / "tasks")
     log = MachineLog(Path(out_dir) / MACHINE_LOG)
     hardware = user_hardware()  # read once: the contents the keys cover are the contents sent
+    tasks = [t.to_dict() if hasattr(t, "to_dict") else t for t in tasks]  # typed records travel as plain data
     keys = [task_key(function, t, version, hardware) for t in tasks]
     pending: dict[str, dict] = {}
     for key, task in zip(keys, tasks, strict=True):

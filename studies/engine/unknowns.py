@@ -38,6 +38,7 @@ from scenes.scenario import Scenario
 from scenes.sourced import DATA_DIR as SCENE_DATA_DIR
 from scenes.sourced import DataFileError, load_sourced
 from scenes.view import camera_names
+from studies.engine.frame_task import FrameTask
 
 UNKNOWNS_FILE = Path(__file__).resolve().parents[1] / "data" / "unknowns.toml"
 KINDS = ("uniform", "loguniform", "choice", "fixed")
@@ -325,7 +326,7 @@ def _from_unit(u: Unknown, q: np.ndarray) -> list:
     return [float(v) for v in np.clip(x, u.low, u.high)]
 
 
-def apply(task: dict, values: dict[str, Any], unknowns: dict[str, Unknown] | None = None) -> dict:
+def apply(task: dict | FrameTask, values: dict[str, Any], unknowns: dict[str, Unknown] | None = None) -> dict:
     """A new frame task (see :mod:`studies.engine.frame`) with ``values`` (name → value) set.
 
     Scenario targets go into ``task["scenario"]``, camera targets into
@@ -333,10 +334,11 @@ def apply(task: dict, values: dict[str, Any], unknowns: dict[str, Unknown] | Non
     ``task["scenario"]["data"]`` (``"leds.red.luminous_intensity_cd"`` → value) unless the value is
     the data file's own (then the task stays as a nominal one, with the key it had). Unknowns
     scoped to other cameras than the task's, and ``data.beacons.<name>.`` ones of another beacon,
-    are skipped. ``task`` itself is left unchanged.
+    are skipped. ``task`` itself is left unchanged; the result is the task's plain form
+    (:meth:`studies.engine.frame_task.FrameTask.coerce` reads it).
     """
     unknowns = load_unknowns() if unknowns is None else unknowns
-    out = copy.deepcopy(task)
+    out = task.to_dict() if isinstance(task, FrameTask) else copy.deepcopy(task)
     scenario = out.setdefault("scenario", {})
     camera = scenario.get("camera", Scenario.__dataclass_fields__["camera"].default)
     beacon = scenario.get("beacon", Scenario.__dataclass_fields__["beacon"].default)

@@ -11,18 +11,36 @@ from pipeline.detect import detect
 from pipeline.thesis_pose import EQUAL_WEIGHTS, STUDY_WEIGHTS
 from scenes.scenario import Scenario
 from scenes.view import camera_geometry, project
-from studies.engine.frame import _detect_options
+from studies.engine.frame import _detect_options, noise_seed
+from studies.engine.frame_task import FrameTask
 from tests.helpers.synthetic import draw_markers
 
 
 def test_task_options_become_detector_options():
     camera = load_camera("canon-t6-18mm")
-    assert _detect_options({}, camera) == {}
-    assert _detect_options({"quest_weights": "equal"}, camera)["quest_weights"] == EQUAL_WEIGHTS
-    rect = _detect_options({"rectification": {"alpha": 1}}, camera)
+
+    def options(**fields):
+        return _detect_options(FrameTask(scenario={}, seed=0, **fields), camera)
+
+    assert options() == {}
+    assert options(quest_weights="equal")["quest_weights"] == EQUAL_WEIGHTS
+    rect = options(rectification={"alpha": 1})
     assert rect["alpha"] == 1.0 and rect["calibration"].width_px == 5184
     with pytest.raises(ValueError, match=r"^quest_weights: expected one of tuned, equal"):
-        _detect_options({"quest_weights": "heavy"}, camera)
+        options(quest_weights="heavy")
+
+
+def test_a_frame_task_round_trips_its_plain_form_and_names_a_misspelt_field():
+    plain = {"scenario": {"range_m": 4.0}, "render": {"spp": 2}, "seed": 3, "full_frame": False, "trackers": ["best"]}
+    task = FrameTask.coerce(plain)
+    assert task.to_dict() == plain and not task.is_full_frame and task.with_noise
+    assert noise_seed(task) == noise_seed(plain)  # the same noise from either form
+    with pytest.raises(ValueError, match=r"^task\.full_fram: not a frame-task field \(did you mean 'full_frame'\?\)$"):
+        FrameTask.coerce({**plain, "full_fram": True})
+    with pytest.raises(ValueError, match=r"^task\.seed: expected an integer >= 0, got -1$"):
+        FrameTask.coerce({**plain, "seed": -1})
+    with pytest.raises(ValueError, match=r"^task\.trackers: expected a list of names, got 'best'$"):
+        FrameTask.coerce({**plain, "trackers": "best"})
 
 
 def test_equal_and_tuned_weights_give_different_study_attitudes_on_the_same_markers():
