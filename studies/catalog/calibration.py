@@ -1,0 +1,372 @@
+"""Calibrate the unknowns by history matching against what the study saw at close range (issue 25).
+
+The study set itself up on close-range frames: it tuned its colour boxes by hand on a webcam's
+images of V1 at 150 mm, each colour, lights on and off, and its primary test found V2 at 1 m over
+0-30° with both lenses (docs/source-study.md §10). Those observations (``studies/data/observations.toml``,
+each with its observation error and model discrepancy) are the only calibration data; every range
+of 2 m and beyond stays a prediction.
+
+A point of the unknowns (every registry entry of the conditions' cameras, one dimmer setting per
+beacon side, and which webcam the thresholds were tuned on: the space of
+:func:`studies.catalog.unknowns_search.search_space`) becomes frame tasks of every observed
+condition × noise seed; the simulator's output for an observation is the mean over the seeds of
+:data:`OUTPUTS`. The history match (:func:`studies.engine.calibration.history_match`) emulates those
+outputs with Gaussian processes, rules out the points whose implausibility exceeds the cut-off and
+refocuses, wave after wave; what is not ruled out (NROY) is the calibrated set.
+
+Writes into ``out``: ``history.json`` (every wave, rewritten after each so an interrupted run
+resumes from it), ``nroy.csv`` (the not-ruled-out points, values), ``summary.json`` and the
+figures of :func:`studies.engine.calibration.write_figures`; finished frames in ``tasks/`` as
+every study's.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from scenes.led import SIDE_COLOURS
+from scenes.render_cache import atomic_write_bytes
+from scenes.sourced import DataFileError
+from studies.catalog import unknowns_search
+from studies.engine import strict_json
+from studies.engine.calibration import (
+    HistoryMatch,
+    InputSpace,
+    Observation,
+    Settings,
+    from_json,
+    history_match,
+    to_json,
+    write_figures,
+)
+from studies.engine.frame_task import FrameTask
+from studies.engine.sweep import Execution, run_frames
+from studies.engine.unknowns import Unknown, apply
+
+__all__ = [
+    "CONDITIONS",
+    "OBSERVATIONS_FILE",
+    "OUTPUTS",
+    "Observed",
+    "load_observations",
+    "run",
+    "search_space",
+    "simulator",
+    "tasks",
+]
+
+NAME = "calibrate-unknowns"
+OBSERVATIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "observations.toml"
+RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
+"""Render settings of the calibration's frames (close range: the target alone is in view)."""
+
+CONDITIONS: dict[str, dict] = {
+    "webcam-150mm": {
+        "scenario": {"beacon": "v1", "range_m": 0.15, "camera": unknowns_search.WEBCAMS[0]},
+        "task": {"full_frame": True},
+    },
+    "t6-18mm-1m": {
+        "scenario": {"beacon": "v2", "range_m": 1.0, "camera": "canon-t6-18mm"},
+        "task": {"align_px": 16},
+    },
+    "t6-10mm-1m": {
+        "scenario": {"beacon": "v2", "range_m": 1.0, "camera": "canon-t6-10mm"},
+        "task": {"align_px": 16},
+    },
+}
+"""The close-range set-ups: Scenario fields and frame-task options. The webcam frame is the whole
+saved frame (the tuning webcam is an unknown); the T6 frames a crop aligned to 16 px, so JPEG blocks
+and the study's 50 % resize group the pixels as in the whole frame, at the primary test's ISO 6400
+and 1/60 s."""
+BUILT = {"foam": True, "paper_sheets": 1, "paper_colour": "matched", "led_current_mA": 20.0}
+"""The beacons as built (foam + one sheet, docs/source-study.md §3); the drive is the point's."""
+T6_EXPOSURE = {"iso": 6400, "exposure_s": 1 / 60}
+"""The primary test's DSLR settings (docs/source-study.md §10, item 2)."""
+
+
+def _side_blobs(rows: Sequence[dict]) -> float:
+    """The study's tracker's blobs of the side's colour (printed boxes and morphology), mean over frames."""
+    values = [float(r["side_blobs"] or 0) for r in rows if r["tracker"] == "thesis"]
+    return float(np.mean(values)) if values else math.nan
+
+
+def _core_clipped(rows: Sequence[dict]) -> float:
+    """The marker cores' clipped fraction (raw, mean of the five markers), mean over frames."""
+    values = [float(r["core_saturated_fraction_mean"]) for r in rows if r["tracker"] == "thesis"]
+    return float(np.mean(values)) if values else math.nan
+
+
+OUTPUTS: dict[str, Callable[[Sequence[dict]], float]] = {"side_blobs": _side_blobs, "core_clipped": _core_clipped}
+"""Simulator outputs an observation may name: frames' rows → one number."""
+
+
+@dataclass(frozen=True)
+class Observed:
+    """One observation and the frames that simulate it.
+
+    Attributes
+    ----------
+    observation
+        The observed value with its error and discrepancy (:class:`studies.engine.calibration.Observation`).
+    condition
+        Key of :data:`CONDITIONS`.
+    side, environment, yaw_deg
+        The frame's side, room and yaw, degrees.
+    drive_mA
+        The LED drive, mA; None: the side's dimmer setting, an unknown of the point.
+    output
+        Key of :data:`OUTPUTS`.
+    """
+
+    observation: Observation
+    condition: str
+    side: str
+    environment: str
+    yaw_deg: float
+    drive_mA: float | None
+    output: str
+
+
+_KEYS = {
+    "condition", "side", "environment", "yaw_deg", "drive", "output",
+    "z", "obs_sd", "obs_reason", "disc_sd", "disc_reason",
+}  # fmt: skip
+
+
+def load_observations(path: str | Path = OBSERVATIONS_FILE) -> tuple[Observed, ...]:
+    """The observations file, checked (:class:`scenes.sourced.DataFileError`, one line naming the field)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise DataFileError(f"{path}: cannot read observations ({str(exc).splitlines()[0]})") from exc
+    if not raw:
+        raise DataFileError(f"{path}: no observations")
+    return tuple(_observed(name, table, f"{path}: {name}") for name, table in raw.items())
+
+
+def _observed(name: str, t: Any, at: str) -> Observed:
+    if not isinstance(t, dict):
+        raise DataFileError(f"{at}: expected a table")
+    extra = sorted(set(t) - _KEYS)
+    if extra:
+        raise DataFileError(f"{at}.{extra[0]}: unknown key (expected some of {', '.join(sorted(_KEYS))})")
+    for key in ("condition", "side", "environment", "drive", "output", "z", "obs_sd", "disc_sd"):
+        if key not in t:
+            raise DataFileError(f"{at}.{key}: missing")
+    for key in ("obs_reason", "disc_reason"):
+        if not isinstance(t.get(key), str) or len(t[key].strip()) < 10:
+            raise DataFileError(f"{at}.{key}: expected the reasoning (a sentence)")
+    checks = (
+        ("condition", t["condition"] in CONDITIONS, ", ".join(CONDITIONS)),
+        ("side", t["side"] in SIDE_COLOURS, ", ".join(SIDE_COLOURS)),
+        ("environment", t["environment"] in ("dark-room", "lit-room"), "dark-room or lit-room"),
+        ("output", t["output"] in OUTPUTS, ", ".join(OUTPUTS)),
+        ("drive", t["drive"] == "dimmed" or _number(t["drive"], positive=True), '"dimmed" or a current > 0 mA'),
+        ("yaw_deg", _number(t.get("yaw_deg", 0.0)) and abs(t.get("yaw_deg", 0.0)) <= 90, "an angle in [-90, 90]"),
+        ("z", _number(t["z"]), "a finite number"),
+        ("obs_sd", _number(t["obs_sd"]) and t["obs_sd"] >= 0, "a standard deviation >= 0"),
+        ("disc_sd", _number(t["disc_sd"]) and t["disc_sd"] >= 0, "a standard deviation >= 0"),
+    )
+    for key, ok, expected in checks:
+        if not ok:
+            raise DataFileError(f"{at}.{key}: expected {expected}, got {t.get(key)!r}")
+    observation = Observation(
+        name=name,
+        z=float(t["z"]),
+        obs_var=float(t["obs_sd"]) ** 2,
+        disc_var=float(t["disc_sd"]) ** 2,
+        obs_reason=t["obs_reason"],
+        disc_reason=t["disc_reason"],
+    )
+    drive = None if t["drive"] == "dimmed" else float(t["drive"])
+    yaw = float(t.get("yaw_deg", 0.0))
+    return Observed(observation, t["condition"], t["side"], t["environment"], yaw, drive, t["output"])
+
+
+def _number(x: Any, positive: bool = False) -> bool:
+    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        return False
+    return x > 0 if positive else True
+
+
+def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
+    """The unknowns of the observed conditions' cameras, one dimmer setting per beacon side that an
+    observation leaves dimmed, and which webcam tuned the thresholds (when a webcam frame is observed)."""
+    space = unknowns_search.search_space()
+    cameras = {CONDITIONS[o.condition]["scenario"]["camera"] for o in observed}
+    webcam = bool(cameras & set(unknowns_search.WEBCAMS))
+    cameras |= set(unknowns_search.WEBCAMS) if webcam else set()
+    t6_10 = {n: u for n, u in unknowns_search.load_unknowns().items() if "canon-t6-10mm" in u.cameras}
+    if "canon-t6-10mm" in cameras:
+        space.update(t6_10)  # the search of unknowns-search had no 10 mm condition
+    drives = {
+        unknowns_search.drive_name(CONDITIONS[o.condition]["scenario"]["beacon"], o.side)
+        for o in observed
+        if o.drive_mA is None
+    }
+    out = {}
+    for name, u in space.items():
+        if name.startswith("led_drive_"):
+            if name in drives:
+                out[name] = u
+        elif name == unknowns_search.TUNING_WEBCAM.name:
+            if webcam:
+                out[name] = u
+        elif not u.cameras or cameras & set(u.cameras):
+            out[name] = u
+    return out
+
+
+def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str, Unknown], seeds: int) -> list[dict]:
+    """Frame tasks of every point × observation × seed (the study's tracker and estimator only), tagged
+    with the point and the observation."""
+    registry = unknowns_search.registry_for(space) if any(k.startswith("led_drive_") for k in space) else space
+    out = []
+    for index, values in enumerate(points):
+        for o in observed:
+            condition = CONDITIONS[o.condition]
+            scenario = {
+                **BUILT,
+                **condition["scenario"],
+                "side": o.side,
+                "environment": o.environment,
+                "yaw_deg": o.yaw_deg,
+            }
+            own = dict(values)
+            if o.drive_mA is None:
+                own = unknowns_search.task_values(values, scenario["beacon"], o.side)
+            else:
+                own = {k: v for k, v in values.items() if not k.startswith("led_drive_")}
+                scenario["led_current_mA"] = o.drive_mA
+            for seed in range(seeds):
+                task = {
+                    "scenario": dict(scenario),
+                    "render": dict(RENDER),
+                    "seed": seed,
+                    "trackers": ["thesis"],
+                    "estimators": ["thesis"],
+                    **condition["task"],
+                    "tags": {"point": index, "observation": o.observation.name},
+                }
+                if scenario["camera"].startswith("canon-t6"):
+                    task["exposure"] = dict(T6_EXPOSURE)
+                task = apply(task, own, registry)  # tuning_webcam sets a webcam frame's camera
+                out.append(FrameTask.coerce(task).to_dict())
+    return out
+
+
+def simulator(out: Path, observed: Sequence[Observed], space: dict[str, Unknown], seeds: int, execution: Execution):
+    """``simulate(values) -> (n, m) outputs`` for :func:`studies.engine.calibration.history_match`: the
+    points' frames run (and stored in ``out``, so a repeated point is not simulated twice), each
+    observation's output the mean over its seeds (NaN where no frame of it ran)."""
+
+    def simulate(points: list[dict[str, Any]]) -> np.ndarray:
+        rows = run_frames(tasks(points, observed, space, seeds), out, execution, description="calibration frames")
+        frame = pd.DataFrame(rows)
+        result = np.full((len(points), len(observed)), np.nan)
+        for (index, name), g in frame.groupby(["point", "observation"]):
+            j = next(j for j, o in enumerate(observed) if o.observation.name == name)
+            result[int(index), j] = OUTPUTS[observed[j].output](g.to_dict("records"))
+        return result
+
+    return simulate
+
+
+def run(
+    out: Path,
+    *,
+    settings: Settings | None = None,
+    seeds: int = 2,
+    observations: str | Path = OBSERVATIONS_FILE,
+    execution: Execution = Execution(),
+) -> HistoryMatch:
+    """History-match the unknowns to the observations; write the record, NROY set, summary and figures.
+
+    An interrupted run resumes from ``out/history.json`` (its finished waves) and ``out/tasks`` (its
+    finished frames).
+    """
+    settings = Settings() if settings is None else settings
+    if seeds < 1:
+        raise ValueError(f"seeds: expected an integer >= 1, got {seeds!r}")
+    observed = load_observations(observations)
+    unknowns = search_space(observed)
+    space = InputSpace.from_unknowns(unknowns)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = out / "history.json"
+    resume = from_json(record.read_text(encoding="utf-8")) if record.is_file() else None
+
+    def save(result: HistoryMatch) -> None:
+        atomic_write_bytes(record, to_json(result).encode())
+
+    result = history_match(
+        simulator(out, observed, unknowns, seeds, execution),
+        space,
+        [o.observation for o in observed],
+        settings=settings,
+        resume=resume,
+        on_wave=save,
+    )
+    save(result)
+    nroy = pd.DataFrame(space.values(result.nroy_points)) if len(result.nroy_points) else pd.DataFrame()
+    atomic_write_bytes(out / "nroy.csv", nroy.to_csv(index=False, float_format="%.6g").encode())
+    write_figures(result, out)
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed), indent=2).encode())
+    return result
+
+
+def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
+    """What the match found, in plain data: waves with their NROY fraction, why it stopped, and per
+    observation its condition and the discrepancy it needed."""
+    return {
+        "study": NAME,
+        "stopped": result.stopped,
+        "waves": [
+            {
+                "wave": w.index,
+                "runs": len(w.design),
+                "failed_runs": int(np.isnan(w.outputs).any(axis=1).sum()),
+                "nroy_fraction": w.nroy_fraction,
+                "loo_coverage_95": [d.coverage_95 for d in w.loo],
+            }
+            for w in result.waves
+        ],
+        "nroy_points": len(result.nroy_points),
+        "discrepancy": [
+            {
+                "observation": d.observation,
+                "stated_sd": d.stated_sd,
+                "alone_sd": d.alone_sd,
+                "joint_sd": d.joint_sd,
+                "rules_out_alone": d.rules_out_alone,
+            }
+            for d in result.discrepancy
+        ],
+        "observations": [
+            {
+                "name": o.observation.name,
+                "condition": o.condition,
+                "side": o.side,
+                "environment": o.environment,
+                "yaw_deg": o.yaw_deg,
+                "output": o.output,
+                "z": o.observation.z,
+            }
+            for o in observed
+        ],
+        "inputs": list(result.space.names),
+    }
+
+
+def quick_settings(settings: Settings) -> Settings:
+    """The small form: 8 runs per wave, 3 waves, a 1024-point reference sample (tests and a first look)."""
+    return replace(settings, n_per_wave=8, min_waves=3, max_waves=3, n_reference=1024, n_restarts=1)
