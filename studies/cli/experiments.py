@@ -423,6 +423,64 @@ def unknowns_search(
     )
 
 
+def calibrate_unknowns(
+    out: opt.Out,
+    runs_per_wave: Annotated[
+        int | None,
+        typer.Option(
+            "--runs-per-wave",
+            help="Points of the unknowns simulated per wave (3-4096).",
+            show_default="40; 8 with --quick",
+        ),
+    ] = None,
+    waves: Annotated[int, typer.Option("--waves", help="Waves at most (at least 3 unless nothing is left), 3-20.")] = 5,
+    seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per point and observation.")] = 2,
+    observations: Annotated[
+        Path | None,
+        typer.Option(
+            "--observations", metavar="FILE", help="Observations file.", show_default="studies/data/observations.toml"
+        ),
+    ] = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="8 runs per wave, 3 waves, a small reference sample (a first look).")
+    ] = False,
+    seed: opt.Seed = 0,
+    workers: opt.Workers = None,
+) -> None:
+    """History-match the unknowns to what the study saw at close range; writes history.json, nroy.csv,
+    summary.json and figures (re-run to resume)."""
+    from studies.catalog import calibration
+    from studies.engine.calibration import Settings
+
+    runs = runs_per_wave if runs_per_wave is not None else (8 if quick else 40)
+    if not 3 <= runs <= 4096:
+        raise UsageError(f"runs-per-wave: expected an integer in [3, 4096], got {runs}")
+    if not 3 <= waves <= 20:
+        raise UsageError(f"waves: expected an integer in [3, 20], got {waves}")
+    check_seeds("seeds", seeds)
+    if not 0 <= seed < 2**32:
+        raise UsageError(f"seed: expected an integer in [0, 2^32), got {seed}")
+    path = calibration.OBSERVATIONS_FILE if observations is None else observations
+    try:
+        calibration.load_observations(path)  # every observation checked before any work
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    settings = Settings(n_per_wave=runs, min_waves=3, max_waves=waves, seed=seed)
+    if quick:
+        settings = calibration.quick_settings(settings)
+    run_on = execution(workers)
+    check_render_cache()
+    prepare_out_dir(out)
+    t0 = time.perf_counter()
+    result = calibration.run(out, settings=settings, seeds=seeds, observations=path, execution=run_on)
+    fractions = ", ".join(f"{w.nroy_fraction:.3g}" for w in result.waves)
+    console.print(
+        f"{len(result.waves)} waves ({result.stopped}); NROY fraction after each: {fractions}; "
+        f"{len(result.nroy_points)} reference points not ruled out ({time.perf_counter() - t0:.0f} s); "
+        f"wrote {out}/history.json, nroy.csv, summary.json"
+    )
+
+
 def crop_vs_full(
     out: opt.Out,
     cameras: opt.Cameras = None,
@@ -494,6 +552,7 @@ COMMANDS = {
     "diffuser-mosaic": diffuser_mosaic,
     "bench": bench,
     "unknowns-search": unknowns_search,
+    "calibrate-unknowns": calibrate_unknowns,
     "colour-reach": colour_reach,
     "crop-vs-full": crop_vs_full,
     "tracker-pruning": tracker_pruning,

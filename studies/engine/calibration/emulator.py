@@ -53,7 +53,10 @@ _JITTER = 1e-10
 def _kernel(kind: str, n_features: int) -> Kernel:
     if kind not in KERNELS:
         raise ValueError(f"kernel: expected one of {', '.join(KERNELS)}, got {kind!r}")
-    scales = np.full(n_features, 0.3)
+    # start where the runs are correlated: in p unit-cube features two random points lie ~√(p/6)
+    # apart, so a length of 0.3 would leave every run uncorrelated with every other in a wide space
+    # (K ≈ I: a flat likelihood the optimiser never leaves); 0.3·√p keeps the start informative
+    scales = np.full(n_features, 0.3 * np.sqrt(n_features))
     corr = (
         Matern(length_scale=scales, length_scale_bounds=LENGTH_SCALE_BOUNDS, nu=2.5)
         if kind == "matern52"
