@@ -449,6 +449,8 @@ def calibrate_unknowns(
 ) -> None:
     """History-match the unknowns to what the study saw at close range; writes history.json, nroy.csv,
     summary.json and figures (re-run to resume)."""
+    from dataclasses import replace
+
     from studies.catalog import calibration
     from studies.engine.calibration import Settings
 
@@ -465,9 +467,10 @@ def calibrate_unknowns(
         calibration.load_observations(path)  # every observation checked before any work
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    settings = Settings(n_per_wave=runs, min_waves=3, max_waves=waves, seed=seed)
+    settings = Settings(min_waves=3, max_waves=waves, seed=seed)
     if quick:
         settings = calibration.quick_settings(settings)
+    settings = replace(settings, n_per_wave=runs)  # --runs-per-wave wins over --quick's 8
     run_on = execution(workers)
     check_render_cache()
     prepare_out_dir(out)
