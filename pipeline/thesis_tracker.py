@@ -305,6 +305,7 @@ def thesis_track(
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
     detector = _blob_detector(s)
     counts, all_blobs = {}, []
+    first_five = None  # every colour's blobs are counted (what each box saw), the side is the study's
     u0, v0 = crop_origin_px
     for colour in SIDE_COLOURS:
         boxes = s.ranges().get(colour, [])
@@ -321,9 +322,10 @@ def thesis_track(
         ]
         all_blobs += blobs
         counts[colour] = len(blobs)
-        if len(blobs) == 5:
-            full = np.array([[b.u, b.v] for b in blobs])
-            return _numbered(colour, full, intrinsics, scale, all_blobs)
+        if len(blobs) == 5 and first_five is None:
+            first_five = colour, np.array([[b.u, b.v] for b in blobs])
+    if first_five is not None:  # the study's rule: the first colour, in its order, with exactly 5
+        return _numbered(*first_five, intrinsics, scale, all_blobs)
     summary = ", ".join(f"{c}: {n}" for c, n in counts.items())
     return TrackResult(
         None, None, f"no colour with exactly 5 blobs ({summary})", all_blobs, failure=Failure.NO_COLOUR_WITH_FIVE

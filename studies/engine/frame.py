@@ -60,7 +60,9 @@ rounding had moved dark codes up more often than down: +1.6 % false blobs on a C
 and the sensor's noise from a seed per frame (:func:`noise_seed`), not per seed index (issue 24).
 8: PnP falls back to EPnP where OpenCV's SQPnP refuses a distant target (:mod:`pipeline.pnp`; V2
 beyond ~19 m, V1 beyond ~12 m had failed as "no fit"); scenarios may carry data-file overrides
-(``Scenario.data``) and cameras the ISP's white point and borrowed sensitivities (issue 25)."""
+(``Scenario.data``) and cameras the ISP's white point and borrowed sensitivities; the study's
+tracker counts every colour's blobs (``side_blobs`` of a side after the first with exactly 5 had been
+0), its answer unchanged (issue 25)."""
 
 
 def frame_scenario(task: FrameTask | dict) -> Scenario:
