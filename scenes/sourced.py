@@ -16,7 +16,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DATA_DIR", "DataFileError", "Fields", "load_sourced", "loads_sourced"]
+__all__ = ["DATA_DIR", "DataFileError", "Fields", "load_sourced", "load_tables", "loads_sourced"]
 
 VALUE_KEYS = ("value", "source", "assumed")
 """The keys of a number's inline table: the value and one of the two provenance notes."""
@@ -124,6 +124,19 @@ def check_dotted_keys(text: str, label: str) -> None:
         raise DataFileError(
             f"{label}: expected tables and arrays nested at most {MAX_NESTING} deep, got a dotted key of {parts} parts"
         )
+
+
+def load_tables(path: str | Path, what: str) -> dict[str, Any]:
+    """A TOML file of named tables (a registry: ``what`` names its entries in errors), read whole;
+    :class:`DataFileError` in one line when it cannot be read or holds none."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise DataFileError(f"{path}: cannot read {what} ({str(exc).splitlines()[0]})") from exc
+    if not raw:
+        raise DataFileError(f"{path}: no {what}")
+    return raw
 
 
 def load_sourced(path: str | Path) -> tuple[dict[str, Any], dict[str, str]]:

@@ -23,7 +23,6 @@ every study's.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -34,7 +33,7 @@ import pandas as pd
 
 from scenes.led import SIDE_COLOURS
 from scenes.render_cache import atomic_write_bytes
-from scenes.sourced import DataFileError
+from scenes.sourced import DataFileError, load_tables
 from studies.catalog import unknowns_search
 from studies.engine import strict_json
 from studies.engine.calibration import (
@@ -143,13 +142,7 @@ _KEYS = {
 
 def load_observations(path: str | Path = OBSERVATIONS_FILE) -> tuple[Observed, ...]:
     """The observations file, checked (:class:`scenes.sourced.DataFileError`, one line naming the field)."""
-    path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise DataFileError(f"{path}: cannot read observations ({str(exc).splitlines()[0]})") from exc
-    if not raw:
-        raise DataFileError(f"{path}: no observations")
+    raw = load_tables(path, "observations")
     return tuple(_observed(name, table, f"{path}: {name}") for name, table in raw.items())
 
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import tomllib
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
@@ -36,7 +35,7 @@ from scipy.stats import loguniform, qmc, uniform
 from scenes.data_overrides import DATA_PATHS, GAIN, RENDER, data_path
 from scenes.scenario import Scenario
 from scenes.sourced import DATA_DIR as SCENE_DATA_DIR
-from scenes.sourced import DataFileError, load_sourced
+from scenes.sourced import DataFileError, load_sourced, load_tables
 from scenes.view import camera_names
 from studies.engine.frame_task import FrameTask
 
@@ -255,13 +254,7 @@ def _scene_data(file: str) -> dict:
 def load_unknowns(path: str | Path = UNKNOWNS_FILE) -> dict[str, Unknown]:
     """The registry: name → :class:`Unknown`, in file order, validated (:class:`DataFileError`, one line
     naming the file and the field)."""
-    path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise DataFileError(f"{path}: cannot read data file ({str(exc).splitlines()[0]})") from exc
-    if not raw:
-        raise DataFileError(f"{path}: no unknowns")
+    raw = load_tables(path, "unknowns")
     return {name: _parse(name, table, str(path)) for name, table in raw.items()}
 
 
