@@ -29,6 +29,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from scenes.beacon import HOUSING_FINISHES
+from scenes.led import SIDE_COLOURS
+
 __all__ = ["DATA_PATHS", "GAIN", "RENDER", "DataPath", "check_data_overrides", "data_path"]
 
 GAIN = "gain"
@@ -130,9 +133,6 @@ def data_path(path: str) -> tuple[DataPath, dict[str, str]]:
     >>> data_path("leds.green.luminous_intensity_cd")[1]
     {'colour': 'green'}
     """
-    from scenes.beacon import HOUSING_FINISHES
-    from scenes.led import SIDE_COLOURS
-
     parts = path.split(".") if isinstance(path, str) else []
     for pattern, spec in DATA_PATHS.items():
         want = pattern.split(".")

@@ -198,9 +198,8 @@ def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
     cameras = {CONDITIONS[o.condition]["scenario"]["camera"] for o in observed}
     webcam = bool(cameras & set(unknowns_search.WEBCAMS))
     cameras |= set(unknowns_search.WEBCAMS) if webcam else set()
-    t6_10 = {n: u for n, u in unknowns_search.load_unknowns().items() if "canon-t6-10mm" in u.cameras}
-    if "canon-t6-10mm" in cameras:
-        space.update(t6_10)  # the search of unknowns-search had no 10 mm condition
+    if "canon-t6-10mm" in cameras:  # the search of unknowns-search had no 10 mm condition
+        space.update({n: u for n, u in unknowns_search.load_unknowns().items() if "canon-t6-10mm" in u.cameras})
     drives = {
         unknowns_search.drive_name(CONDITIONS[o.condition]["scenario"]["beacon"], o.side)
         for o in observed
@@ -234,7 +233,6 @@ def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str,
                 "environment": o.environment,
                 "yaw_deg": o.yaw_deg,
             }
-            own = dict(values)
             if o.drive_mA is None:
                 own = unknowns_search.task_values(values, scenario["beacon"], o.side)
             else:
