@@ -148,7 +148,7 @@ at 400 regions, as much as the whole 2-Mpx mask's morphology; beyond this the wh
 processed, the same result)."""
 
 
-def _close_reach(s: ThesisTrackerSettings) -> tuple[int, int]:
+def close_reach(s: ThesisTrackerSettings) -> tuple[int, int]:
     """(x, y) reach of the close's dilations, px (10, 10)."""
     cx, cy = _kernel_reach(CLOSE_KERNEL)
     return s.close_iterations * cx, s.close_iterations * cy
@@ -157,11 +157,11 @@ def _close_reach(s: ThesisTrackerSettings) -> tuple[int, int]:
 def _group_gap(s: ThesisTrackerSettings) -> tuple[int, int]:
     """(x, y) Chebyshev gap, px, up to which two regions share a group: their close dilations
     (within r = 10 px of each) then overlap or touch (2·r + 1 = 21 px)."""
-    rx, ry = _close_reach(s)
+    rx, ry = close_reach(s)
     return 2 * rx + 1, 2 * ry + 1
 
 
-def _survivor_size(s: ThesisTrackerSettings) -> tuple[int, int]:
+def survivor_size(s: ThesisTrackerSettings) -> tuple[int, int]:
     """Smallest (width, height), px, of a closed region the final erosion leaves a pixel of: the
     span of the erosion kernel's anchor row and column, times the iterations, plus one (5, 13)."""
     ys, xs = np.nonzero(ERODE_KERNEL)
@@ -211,8 +211,8 @@ def mask_windows(
     _, group = connected_components(csr_matrix((gap_x <= gx) & (gap_y <= gy)), directed=False)
     bx0, by0, bx1, by1 = group_bounds(group, int(group.max()) + 1, x0, y0, x1, y1)
     h, w = mask.shape
-    rx, ry = _close_reach(s)
-    need_w, need_h = _survivor_size(s)
+    rx, ry = close_reach(s)
+    need_w, need_h = survivor_size(s)
     inside = (bx0 > rx) & (by0 > ry) & (bx1 < w - 1 - rx) & (by1 < h - 1 - ry)
     keep = ~(inside & ((by1 - by0 + 1 < need_h) | (bx1 - bx0 + 1 < need_w)))
     mx, my = morphology_reach(s)
@@ -272,6 +272,18 @@ def windowed_morphology(
     return out
 
 
+def processed_hsv(bgr: NDArray, intrinsics: Intrinsics, s: ThesisTrackerSettings) -> tuple[NDArray[np.uint8], float]:
+    """The image the tracker works on: 8-bit BGR resized by its scale (0.5 for a frame ≥ 3000 px wide
+    unless ``s.resize`` says otherwise, bilinear), as HSV; and that scale."""
+    bgr = to_uint8(bgr)
+    scale = s.resize if s.resize is not None else (0.5 if intrinsics.width_px >= 3000 else 1.0)
+    h, w = bgr.shape[:2]
+    if scale != 1.0:
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        bgr = cv2.resize(bgr, size, interpolation=cv2.INTER_LINEAR)
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV), scale
+
+
 def thesis_track(
     image,
     intrinsics: Intrinsics,
@@ -296,13 +308,7 @@ def thesis_track(
     bgr, reason = as_bgr(image)
     if bgr is None:
         return TrackResult(None, None, reason, failure=Failure.IMAGE)
-    bgr = to_uint8(bgr)
-    scale = s.resize if s.resize is not None else (0.5 if intrinsics.width_px >= 3000 else 1.0)
-    h, w = bgr.shape[:2]
-    if scale != 1.0:
-        size = (max(1, round(w * scale)), max(1, round(h * scale)))
-        bgr = cv2.resize(bgr, size, interpolation=cv2.INTER_LINEAR)
-    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    hsv, scale = processed_hsv(bgr, intrinsics, s)
     detector = _blob_detector(s)
     counts, all_blobs = {}, []
     first_five = None  # every colour's blobs are counted (what each box saw), the side is the study's

@@ -37,6 +37,7 @@ from scenes.sourced import DataFileError, load_tables
 from studies.catalog import unknowns_search
 from studies.engine import strict_json
 from studies.engine.calibration import (
+    KINDS,
     HistoryMatch,
     InputSpace,
     Observation,
@@ -54,6 +55,7 @@ __all__ = [
     "CONDITIONS",
     "OBSERVATIONS_FILE",
     "OUTPUTS",
+    "PRIMARY_SIDE",
     "Observed",
     "load_observations",
     "run",
@@ -91,20 +93,38 @@ T6_EXPOSURE = {"iso": 6400, "exposure_s": 1 / 60}
 """The primary test's DSLR settings (docs/source-study.md §10, item 2)."""
 
 
-def _side_blobs(rows: Sequence[dict]) -> float:
-    """The study's tracker's blobs of the side's colour (printed boxes and morphology), mean over frames."""
-    values = [float(r["side_blobs"] or 0) for r in rows if r["tracker"] == "thesis"]
-    return float(np.mean(values)) if values else math.nan
+def _thesis_mean(field: str) -> Callable[[Sequence[dict]], float]:
+    """The mean over frames of one field of the study's tracker's rows (NaN where none has it)."""
+
+    def output(rows: Sequence[dict]) -> float:
+        values = [float(r[field]) for r in rows if r["tracker"] == "thesis" and r.get(field) is not None]
+        values = [v for v in values if math.isfinite(v)]
+        return float(np.mean(values)) if values else math.nan
+
+    output.__doc__ = f"Mean ``{field}`` of the study's tracker's rows."
+    return output
 
 
-def _core_clipped(rows: Sequence[dict]) -> float:
-    """The marker cores' clipped fraction (raw, mean of the five markers), mean over frames."""
-    values = [float(r["core_saturated_fraction_mean"]) for r in rows if r["tracker"] == "thesis"]
-    return float(np.mean(values)) if values else math.nan
-
-
-OUTPUTS: dict[str, Callable[[Sequence[dict]], float]] = {"side_blobs": _side_blobs, "core_clipped": _core_clipped}
-"""Simulator outputs an observation may name: frames' rows → one number."""
+OUTPUTS: dict[str, Callable[[Sequence[dict]], float]] = {
+    "side_blobs": _thesis_mean("side_blobs"),
+    "side_closed_height_px": _thesis_mean("side_closed_height_px"),
+    "side_box_distance": _thesis_mean("side_box_distance"),
+    "core_clipped": _thesis_mean("core_saturated_fraction_mean"),
+}
+"""Simulator outputs an observation may name: frames' rows → one number (the mean over the seeds):
+the study's tracker's blobs of the side's colour (printed boxes and morphology), its near-miss measures
+at the true markers (:mod:`pipeline.mask_measures`) and the marker cores' clipped fraction (raw)."""
+PRIMARY_SIDE = Unknown(
+    name="primary_test_side",
+    target="scenario.side",
+    kind="choice",
+    nominal="red",
+    choices=SIDE_COLOURS,
+    cameras=("canon-t6-18mm", "canon-t6-10mm"),
+    provenance="source: docs/source-study.md §10, item 3 names the primary test's beacon (V2), lenses, ranges, "
+    "yaws and room, not the side that faced the camera: any of the four",
+)
+"""The side the primary test showed the camera (its frames' ``side = "primary"``)."""
 
 
 @dataclass(frozen=True)
@@ -114,11 +134,14 @@ class Observed:
     Attributes
     ----------
     observation
-        The observed value with its error and discrepancy (:class:`studies.engine.calibration.Observation`).
+        The observed value with its error and discrepancy (:class:`studies.engine.calibration.Observation`),
+        named ``<frame>.<output>``.
+    frame
+        The observed frame's table name: the frames of one table serve all its outputs.
     condition
         Key of :data:`CONDITIONS`.
     side, environment, yaw_deg
-        The frame's side, room and yaw, degrees.
+        The frame's side (``primary``: :data:`PRIMARY_SIDE`, the point's), room and yaw, degrees.
     drive_mA
         The LED drive, mA; None: the side's dimmer setting, an unknown of the point.
     output
@@ -126,6 +149,7 @@ class Observed:
     """
 
     observation: Observation
+    frame: str
     condition: str
     side: str
     environment: str
@@ -134,37 +158,76 @@ class Observed:
     output: str
 
 
-_KEYS = {
-    "condition", "side", "environment", "yaw_deg", "drive", "output",
-    "z", "obs_sd", "obs_reason", "disc_sd", "disc_reason",
-}  # fmt: skip
+_FRAME_KEYS = {"condition", "side", "environment", "yaw_deg", "drive"}
+_OUTPUT_KEYS = {"kind", "z", "obs_sd", "obs_reason", "disc_sd", "disc_reason"}
 
 
 def load_observations(path: str | Path = OBSERVATIONS_FILE) -> tuple[Observed, ...]:
     """The observations file, checked (:class:`scenes.sourced.DataFileError`, one line naming the field)."""
     raw = load_tables(path, "observations")
-    return tuple(_observed(name, table, f"{path}: {name}") for name, table in raw.items())
+    out = []
+    for name, table in raw.items():
+        out += _frame(name, table, f"{path}: {name}")
+    if not out:
+        raise DataFileError(f"{path}: no observation (expected a [frame.output] table)")
+    return tuple(out)
 
 
-def _observed(name: str, t: Any, at: str) -> Observed:
+def _frame(name: str, t: Any, at: str) -> list[Observed]:
     if not isinstance(t, dict):
         raise DataFileError(f"{at}: expected a table")
-    extra = sorted(set(t) - _KEYS)
+    outputs = {k: v for k, v in t.items() if isinstance(v, dict)}
+    fields = {k: v for k, v in t.items() if k not in outputs}
+    extra = sorted(set(fields) - _FRAME_KEYS) + sorted(set(outputs) - set(OUTPUTS))
     if extra:
-        raise DataFileError(f"{at}.{extra[0]}: unknown key (expected some of {', '.join(sorted(_KEYS))})")
-    for key in ("condition", "side", "environment", "drive", "output", "z", "obs_sd", "disc_sd"):
+        expected = f"some of {', '.join(sorted(_FRAME_KEYS))}, or an output table: {', '.join(OUTPUTS)}"
+        raise DataFileError(f"{at}.{extra[0]}: unknown key (expected {expected})")
+    for key in ("condition", "side", "environment", "drive"):
+        if key not in fields:
+            raise DataFileError(f"{at}.{key}: missing")
+    yaw = fields.get("yaw_deg", 0.0)
+    primary = fields["condition"] in CONDITIONS and fields["condition"].startswith("t6-")
+    sides = (*SIDE_COLOURS, "primary") if primary else SIDE_COLOURS
+    checks = (
+        ("condition", fields["condition"] in CONDITIONS, ", ".join(CONDITIONS)),
+        ("side", fields["side"] in sides, ", ".join(sides)),
+        ("environment", fields["environment"] in ("dark-room", "lit-room"), "dark-room or lit-room"),
+        (
+            "drive",
+            fields["drive"] == "dimmed" or _number(fields["drive"], positive=True),
+            '"dimmed" or a current > 0 mA',
+        ),
+        (
+            "yaw_deg",
+            _number(fields.get("yaw_deg", 0.0)) and abs(fields.get("yaw_deg", 0.0)) <= 90,
+            "an angle in [-90, 90]",
+        ),
+    )
+    for key, ok, expected in checks:
+        if not ok:
+            raise DataFileError(f"{at}.{key}: expected {expected}, got {fields.get(key)!r}")
+    if not outputs:
+        raise DataFileError(f"{at}: no output observed (expected a [{name}.<output>] table: {', '.join(OUTPUTS)})")
+    drive = None if fields["drive"] == "dimmed" else float(fields["drive"])
+    return [
+        Observed(_observation(f"{name}.{output}", o, f"{at}.{output}"), name, fields["condition"], fields["side"],
+                 fields["environment"], float(yaw), drive, output)
+        for output, o in outputs.items()
+    ]  # fmt: skip
+
+
+def _observation(name: str, t: dict, at: str) -> Observation:
+    extra = sorted(set(t) - _OUTPUT_KEYS)
+    if extra:
+        raise DataFileError(f"{at}.{extra[0]}: unknown key (expected some of {', '.join(sorted(_OUTPUT_KEYS))})")
+    for key in ("z", "obs_sd", "disc_sd"):
         if key not in t:
             raise DataFileError(f"{at}.{key}: missing")
     for key in ("obs_reason", "disc_reason"):
         if not isinstance(t.get(key), str) or len(t[key].strip()) < 10:
             raise DataFileError(f"{at}.{key}: expected the reasoning (a sentence)")
     checks = (
-        ("condition", t["condition"] in CONDITIONS, ", ".join(CONDITIONS)),
-        ("side", t["side"] in SIDE_COLOURS, ", ".join(SIDE_COLOURS)),
-        ("environment", t["environment"] in ("dark-room", "lit-room"), "dark-room or lit-room"),
-        ("output", t["output"] in OUTPUTS, ", ".join(OUTPUTS)),
-        ("drive", t["drive"] == "dimmed" or _number(t["drive"], positive=True), '"dimmed" or a current > 0 mA'),
-        ("yaw_deg", _number(t.get("yaw_deg", 0.0)) and abs(t.get("yaw_deg", 0.0)) <= 90, "an angle in [-90, 90]"),
+        ("kind", t.get("kind", "equal") in KINDS, ", ".join(KINDS)),
         ("z", _number(t["z"]), "a finite number"),
         ("obs_sd", _number(t["obs_sd"]) and t["obs_sd"] >= 0, "a standard deviation >= 0"),
         ("disc_sd", _number(t["disc_sd"]) and t["disc_sd"] >= 0, "a standard deviation >= 0"),
@@ -172,17 +235,15 @@ def _observed(name: str, t: Any, at: str) -> Observed:
     for key, ok, expected in checks:
         if not ok:
             raise DataFileError(f"{at}.{key}: expected {expected}, got {t.get(key)!r}")
-    observation = Observation(
+    return Observation(
         name=name,
         z=float(t["z"]),
         obs_var=float(t["obs_sd"]) ** 2,
         disc_var=float(t["disc_sd"]) ** 2,
         obs_reason=t["obs_reason"],
         disc_reason=t["disc_reason"],
+        kind=t.get("kind", "equal"),
     )
-    drive = None if t["drive"] == "dimmed" else float(t["drive"])
-    yaw = float(t.get("yaw_deg", 0.0))
-    return Observed(observation, t["condition"], t["side"], t["environment"], yaw, drive, t["output"])
 
 
 def _number(x: Any, positive: bool = False) -> bool:
@@ -193,13 +254,16 @@ def _number(x: Any, positive: bool = False) -> bool:
 
 def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
     """The unknowns of the observed conditions' cameras, one dimmer setting per beacon side that an
-    observation leaves dimmed, and which webcam tuned the thresholds (when a webcam frame is observed)."""
+    observation leaves dimmed (``led_drive_v2_primary`` for the primary test's side), which webcam
+    tuned the thresholds (when a webcam frame is observed) and the primary test's side (when one of
+    its frames is)."""
     space = unknowns_search.search_space()
     cameras = {CONDITIONS[o.condition]["scenario"]["camera"] for o in observed}
     webcam = bool(cameras & set(unknowns_search.WEBCAMS))
     cameras |= set(unknowns_search.WEBCAMS) if webcam else set()
     if "canon-t6-10mm" in cameras:  # the search of unknowns-search had no 10 mm condition
         space.update({n: u for n, u in unknowns_search.load_unknowns().items() if "canon-t6-10mm" in u.cameras})
+    drive = next(u for n, u in space.items() if n.startswith("led_drive_"))
     drives = {
         unknowns_search.drive_name(CONDITIONS[o.condition]["scenario"]["beacon"], o.side)
         for o in observed
@@ -208,35 +272,41 @@ def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
     out = {}
     for name, u in space.items():
         if name.startswith("led_drive_"):
-            if name in drives:
-                out[name] = u
-        elif name == unknowns_search.TUNING_WEBCAM.name:
+            continue
+        if name == unknowns_search.TUNING_WEBCAM.name:
             if webcam:
                 out[name] = u
         elif not u.cameras or cameras & set(u.cameras):
             out[name] = u
+    out.update({name: replace(drive, name=name) for name in sorted(drives)})
+    if any(o.side == "primary" for o in observed):
+        out[PRIMARY_SIDE.name] = PRIMARY_SIDE
     return out
 
 
 def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str, Unknown], seeds: int) -> list[dict]:
-    """Frame tasks of every point × observation × seed (the study's tracker and estimator only), tagged
-    with the point and the observation."""
+    """Frame tasks of every point × observed frame × seed (the study's tracker and estimator only), tagged
+    with the point and the frame's table name (the outputs observed on one frame share its frames)."""
     registry = unknowns_search.registry_for(space) if any(k.startswith("led_drive_") for k in space) else space
+    registry = {k: u for k, u in registry.items() if k != PRIMARY_SIDE.name}
+    frames = {o.frame: o for o in observed}  # one set of frames per table, whatever it observes
     out = []
     for index, values in enumerate(points):
-        for o in observed:
+        for o in frames.values():
             condition = CONDITIONS[o.condition]
+            side = values[PRIMARY_SIDE.name] if o.side == "primary" else o.side
             scenario = {
                 **BUILT,
                 **condition["scenario"],
-                "side": o.side,
+                "side": side,
                 "environment": o.environment,
                 "yaw_deg": o.yaw_deg,
             }
+            point = {k: v for k, v in values.items() if k != PRIMARY_SIDE.name}
             if o.drive_mA is None:
-                own = unknowns_search.task_values(values, scenario["beacon"], o.side)
+                own = unknowns_search.task_values(point, scenario["beacon"], o.side)
             else:
-                own = {k: v for k, v in values.items() if not k.startswith("led_drive_")}
+                own = {k: v for k, v in point.items() if not k.startswith("led_drive_")}
                 scenario["led_current_mA"] = o.drive_mA
             for seed in range(seeds):
                 task = {
@@ -246,7 +316,7 @@ def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str,
                     "trackers": ["thesis"],
                     "estimators": ["thesis"],
                     **condition["task"],
-                    "tags": {"point": index, "observation": o.observation.name},
+                    "tags": {"point": index, "frame": o.frame},
                 }
                 if scenario["camera"].startswith("canon-t6"):
                     task["exposure"] = dict(T6_EXPOSURE)
@@ -264,9 +334,11 @@ def simulator(out: Path, observed: Sequence[Observed], space: dict[str, Unknown]
         rows = run_frames(tasks(points, observed, space, seeds), out, execution, description="calibration frames")
         frame = pd.DataFrame(rows)
         result = np.full((len(points), len(observed)), np.nan)
-        for (index, name), g in frame.groupby(["point", "observation"]):
-            j = next(j for j, o in enumerate(observed) if o.observation.name == name)
-            result[int(index), j] = OUTPUTS[observed[j].output](g.to_dict("records"))
+        for (index, name), g in frame.groupby(["point", "frame"]):
+            records = g.to_dict("records")
+            for j, o in enumerate(observed):
+                if o.frame == name:
+                    result[int(index), j] = OUTPUTS[o.output](records)
         return result
 
     return simulate
@@ -345,11 +417,13 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
         "observations": [
             {
                 "name": o.observation.name,
+                "frame": o.frame,
                 "condition": o.condition,
                 "side": o.side,
                 "environment": o.environment,
                 "yaw_deg": o.yaw_deg,
                 "output": o.output,
+                "kind": o.observation.kind,
                 "z": o.observation.z,
             }
             for o in observed

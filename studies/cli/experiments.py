@@ -411,6 +411,8 @@ def unknowns_search(
     if not 1 <= samples <= MAX_SAMPLES:
         raise UsageError(f"samples: expected an integer in [1, {MAX_SAMPLES}], got {samples}")
     check_seeds("seeds", seeds)
+    if order not in (1, 2, 3):
+        raise UsageError(f"order: expected 1, 2 or 3, got {order}")
     if not 0 <= seed < 2**32:
         raise UsageError(f"seed: expected an integer in [0, 2^32), got {seed}")
     run_on = execution(workers)
@@ -435,6 +437,14 @@ def calibrate_unknowns(
     ] = None,
     waves: Annotated[int, typer.Option("--waves", help="Waves at most (at least 3 unless nothing is left), 3-20.")] = 5,
     seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per point and observation.")] = 2,
+    order: Annotated[
+        int,
+        typer.Option(
+            "--order",
+            help="Rule a point out by the largest (1), second (2) or third (3) largest implausibility over the "
+            "outputs (the third tolerates two outputs the model cannot match).",
+        ),
+    ] = 3,
     observations: Annotated[
         Path | None,
         typer.Option(
@@ -460,6 +470,8 @@ def calibrate_unknowns(
     if not 3 <= waves <= 20:
         raise UsageError(f"waves: expected an integer in [3, 20], got {waves}")
     check_seeds("seeds", seeds)
+    if order not in (1, 2, 3):
+        raise UsageError(f"order: expected 1, 2 or 3, got {order}")
     if not 0 <= seed < 2**32:
         raise UsageError(f"seed: expected an integer in [0, 2^32), got {seed}")
     path = calibration.OBSERVATIONS_FILE if observations is None else observations
@@ -467,7 +479,7 @@ def calibrate_unknowns(
         calibration.load_observations(path)  # every observation checked before any work
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    settings = Settings(min_waves=3, max_waves=waves, seed=seed)
+    settings = Settings(min_waves=3, max_waves=waves, seed=seed, order=order)
     if quick:
         settings = calibration.quick_settings(settings)
     settings = replace(settings, n_per_wave=runs)  # --runs-per-wave wins over --quick's 8

@@ -35,6 +35,7 @@ from pipeline.angles import Intrinsics
 from pipeline.calibration import Calibration
 from pipeline.detect import ESTIMATORS, TRACKERS
 from pipeline.evaluate import evaluate_detection
+from pipeline.mask_measures import marker_mask_measures
 from pipeline.thesis_pose import QUEST_WEIGHTS
 from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.background import render_background
@@ -44,7 +45,7 @@ from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 from studies.engine.frame_task import FrameTask
 
-FRAME_VERSION = 8
+FRAME_VERSION = 9
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.
 4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
@@ -62,7 +63,10 @@ and the sensor's noise from a seed per frame (:func:`noise_seed`), not per seed 
 beyond ~19 m, V1 beyond ~12 m had failed as "no fit"); scenarios may carry data-file overrides
 (``Scenario.data``) and cameras the ISP's white point and borrowed sensitivities; the study's
 tracker counts every colour's blobs (``side_blobs`` of a side after the first with exactly 5 had been
-0), its answer unchanged (issue 25)."""
+0), its answer unchanged (issue 25).
+9: the study's tracker's rows carry its near-miss measures of the side's colour at the true markers
+(``side_box_distance``, ``side_in_box_fraction``, ``side_closed_height_px``, ``survivor_height_px``:
+:mod:`pipeline.mask_measures`; issue 25)."""
 
 
 def frame_scenario(task: FrameTask | dict) -> Scenario:
@@ -180,8 +184,10 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     intrinsics = Intrinsics.from_geometry(camera.geometry)
     detect_options = _detect_options(task, camera)
     rows = []
+    radii = [m["core_radius_px"] for m in saturation]
     for tracker, label, settings in _detectors(task):
         tracked: dict = {}  # the tracker runs once; each estimator reuses its result
+        near = _mask_measures(tracker, image_bgr, intrinsics, truth_uv, radii, scenario.side, settings, cap)
         for estimator in tuple(ESTIMATORS) if task.estimators is None else task.estimators:
             ev = evaluate_detection(
                 image_bgr,
@@ -214,10 +220,25 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
                     "failure": ev.get("failure") or "",
                     "side_blobs": ev.get("side_blobs"),
                     "blobs": len(tracked[tracker].blobs) if tracker in tracked else None,
+                    **near,
                 }
             )
     seconds = time.perf_counter() - t0
     return [{**row, "frame_s": seconds} for row in rows]
+
+
+def _mask_measures(tracker: str, image_bgr, intrinsics, uv, radii, side: str, settings, cap) -> dict:
+    """The study's tracker's near-miss measures of the side's colour at the true markers
+    (:mod:`pipeline.mask_measures`); empty for another tracker."""
+    if tracker != "thesis":
+        return {}
+    m = marker_mask_measures(image_bgr, intrinsics, uv, radii, side, settings=settings, crop_origin_px=(cap.x0, cap.y0))
+    return {
+        "side_box_distance": m.box_distance,
+        "side_in_box_fraction": m.in_box_fraction,
+        "side_closed_height_px": m.closed_height_px,
+        "survivor_height_px": m.survivor_height_px,
+    }
 
 
 def _detect_options(task: FrameTask, camera: Camera) -> dict:

@@ -202,10 +202,10 @@ def test_groups_split_too_early_or_small_groups_dropped_are_caught(monkeypatch):
     gap = thesis_tracker._group_gap(SETTINGS)
     assert gap == (21, 21)
     assert _planted_mismatches(monkeypatch, "_group_gap", (gap[0] - 1, gap[1] - 1)) > 0
-    need = thesis_tracker._survivor_size(SETTINGS)
+    need = thesis_tracker.survivor_size(SETTINGS)
     assert need == (5, 13)
-    assert _planted_mismatches(monkeypatch, "_survivor_size", (need[0] + 1, need[1])) > 0
-    assert _planted_mismatches(monkeypatch, "_survivor_size", (need[0], need[1] + 1)) > 0
+    assert _planted_mismatches(monkeypatch, "survivor_size", (need[0] + 1, need[1])) > 0
+    assert _planted_mismatches(monkeypatch, "survivor_size", (need[0], need[1] + 1)) > 0
 
 
 def test_noise_only_dark_frames_and_hsv_images():

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from pipeline.thesis_tracker import ThesisTrackerSettings, survivor_size
 from scenes.sourced import DataFileError
 from studies.catalog import calibration
 from studies.engine.calibration import InputSpace, Settings
@@ -16,7 +17,14 @@ from studies.engine.frame_task import FrameTask
 
 def test_the_observations_are_close_range_only_with_their_reasons():
     observed = calibration.load_observations()
-    assert len(observed) == 12 and len({o.observation.name for o in observed}) == 12
+    assert len(observed) == 36 and len({o.observation.name for o in observed}) == 36
+    assert len({o.frame for o in observed}) == 12 and {o.output for o in observed} == set(calibration.OUTPUTS) - {
+        "core_clipped"
+    }
+    # "found" bounds the near-miss measures: the closed regions at least as tall as the printed erosion needs
+    heights = [o.observation for o in observed if o.output == "side_closed_height_px"]
+    assert {(h.kind, h.z) for h in heights} == {("at_least", survivor_size(ThesisTrackerSettings())[1])}
+    assert {o.side for o in observed if o.condition.startswith("t6-")} == {"primary"}
     ranges = {calibration.CONDITIONS[o.condition]["scenario"]["range_m"] for o in observed}
     assert ranges <= {0.15, 1.0}  # calibration data only: nothing at 2 m or beyond
     assert all(len(o.observation.obs_reason) > 10 and len(o.observation.disc_reason) > 10 for o in observed)
@@ -24,11 +32,27 @@ def test_the_observations_are_close_range_only_with_their_reasons():
     assert {o.yaw_deg for o in observed if o.condition.startswith("t6-")} == {0.0, 30.0}
 
 
+FRAME = '[a]\ncondition = "webcam-150mm"\nside = "red"\nenvironment = "dark-room"\ndrive = "dimmed"\n'
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
         ('[a]\ncondition = "webcam-2m"\n', r"a\.side: missing|a\.condition"),
         ('[a]\ncolour = "red"\n', r"a\.colour: unknown key"),
+        (
+            '[a]\ncondition = "webcam-150mm"\nside = "red"\nenvironment = "dark-room"\ndrive = "dimmed"\n',
+            r"a: no output",
+        ),
+        (
+            FRAME + '[a.side_blobs]\nkind = "between"\nz = 5\nobs_sd = 1\ndisc_sd = 1\n'
+            'obs_reason = "a reason of a sentence"\ndisc_reason = "a reason of a sentence"\n',
+            r"a\.side_blobs\.kind: expected equal, at_least, at_most",
+        ),
+        (
+            '[a]\ncondition = "webcam-150mm"\nside = "primary"\nenvironment = "dark-room"\ndrive = "dimmed"\n',
+            r"a\.side",
+        ),
     ],
 )
 def test_a_bad_observations_file_is_one_line(tmp_path, text, message):
@@ -48,15 +72,17 @@ def test_a_point_becomes_frame_tasks_with_every_unknown_set():
     space = InputSpace.from_unknowns(unknowns)
     point = space.values(np.full((1, space.dim), 0.9))[0]
     tasks = calibration.tasks([point], observed, unknowns, seeds=2)
-    assert len(tasks) == 2 * len(observed)
-    webcam = [t for t in tasks if t["tags"]["observation"] == "webcam_150mm_green_lit"]
+    assert len(tasks) == 2 * len({o.frame for o in observed})  # a frame's outputs share its frames
+    webcam = [t for t in tasks if t["tags"]["frame"] == "webcam_150mm_green_lit"]
     assert len(webcam) == 2 and all(FrameTask.coerce(t).is_full_frame for t in webcam)
     sc = webcam[0]["scenario"]
     assert sc["camera"] == point["tuning_webcam"] and sc["environment"] == "lit-room" and sc["beacon"] == "v1"
     assert sc["led_current_mA"] == pytest.approx(point["led_drive_v1_green"])
     assert sc["data"]["leds.green.luminous_intensity_cd"] == pytest.approx(point["led_intensity_green"])
     assert sc["data"]["beacons.v1.lit_face_diameter_mm"] == pytest.approx(point["lit_face_diameter_v1"])
-    t6 = next(t for t in tasks if t["tags"]["observation"] == "t6_10mm_1m_30deg")
+    t6 = next(t for t in tasks if t["tags"]["frame"] == "t6_10mm_1m_30deg")
+    assert t6["scenario"]["side"] == point["primary_test_side"]  # the primary test's side is the point's
+    assert t6["scenario"]["led_current_mA"] == pytest.approx(point["led_drive_v2_primary"])
     assert t6["scenario"]["yaw_deg"] == 30.0 and t6["exposure"]["iso"] == 6400
     assert t6["camera_overrides"]["effects.focus_distance_m"] == pytest.approx(point["focus_distance_10mm"])
     assert t6["camera_overrides"]["sensor.ssf_csv"] == point["ssf_t6"]
@@ -68,15 +94,15 @@ def test_a_history_match_is_written_resumed_and_recovers_a_planted_answer(tmp_pa
     out exactly where |2(l − 10) − 5| ≤ 3·√1.09: 10.93-14.07 mm, 63 % of its 10-15 mm range. The match
     finds that band among 21 inactive inputs, writes its record, and a second run resumes from it
     without simulating again."""
-    source = calibration.load_observations()
     wanted = ("t6_18mm_1m_0deg", "t6_18mm_1m_30deg")
     text = calibration.OBSERVATIONS_FILE.read_text()
     tables = text.split("\n[")
-    kept = [t for t in tables[1:] if t.split("]")[0] in wanted]
+    kept = [t for t in tables[1:] if t.split("]")[0] in (*wanted, *(f"{w}.side_blobs" for w in wanted))]
     observations = tmp_path / "obs.toml"
     observations.write_text("".join("[" + t + "\n" for t in kept))
-    assert [o.observation.name for o in calibration.load_observations(observations)] == list(wanted)
-    assert len(source) == 12
+    assert [o.observation.name for o in calibration.load_observations(observations)] == [
+        f"{w}.side_blobs" for w in wanted
+    ]
     calls = []
 
     def planted(out, observed, unknowns, seeds, execution):

@@ -229,6 +229,33 @@ def test_implausibility_and_combination_by_hand():
         combine(per, order=4)
 
 
+def test_bounds_count_only_their_shortfall():
+    """``at_least`` / ``at_most`` observations: 0 on their side, the equality's value past the bound."""
+    obs = (Observation("lo", 13.0, 1.0, 3.0, kind="at_least"), Observation("hi", 0.0, 0.0, 4.0, kind="at_most"))
+    mean = np.array([[20.0, -5.0], [9.0, 6.0], [13.0, 0.0]])
+    per = implausibility(mean, np.zeros((3, 2)), obs)
+    np.testing.assert_allclose(per, [[0.0, 0.0], [4 / 2, 6 / 2], [0.0, 0.0]])
+    d = required_discrepancy_var(mean, np.zeros((3, 2)), obs, cutoff=2.0)
+    np.testing.assert_allclose(d, [[0.0, 0.0], [4 - 1.0, 9.0], [0.0, 0.0]])
+    assert Observation.from_json(obs[0].to_json()) == obs[0]
+    with pytest.raises(ValueError, match="kind"):
+        Observation("x", 1.0, 1.0, 1.0, kind="between")
+
+
+def test_a_bound_keeps_the_region_on_its_side():
+    """History match of y = x on [0, 1] to "y at least 0.6": NROY is x >= ~0.6 (emulator error aside)."""
+    space = InputSpace((Input("x", 0.0, 1.0),))
+    observation = Observation("y", 0.6, 0.0, 0.02**2, kind="at_least")
+    result = history_match(
+        lambda values: np.array([[v["x"]] for v in values]),
+        space,
+        [observation],
+        settings=Settings(n_per_wave=8, min_waves=2, max_waves=2, n_reference=1024, n_restarts=1),
+    )
+    x = result.nroy_points[:, 0]
+    assert x.min() == pytest.approx(0.6 - 3 * 0.02, abs=0.02) and x.max() == pytest.approx(1.0, abs=1e-3)
+
+
 def test_inputs_map_like_the_unknowns_registry():
     q = np.array([[0.0, 0.5, 1.0], [0.25, 0.75, 0.5]])
     values = SPACE.values(q)

@@ -10,7 +10,7 @@ public interface.
 from studies.engine.calibration.emulator import Diagnostics, Emulator, diagnose, fit_emulator, loo, predict
 from studies.engine.calibration.implausibility import CUTOFF, combine, implausibility, required_discrepancy_var
 from studies.engine.calibration.inputs import Input, InputSpace
-from studies.engine.calibration.observations import Observation
+from studies.engine.calibration.observations import KINDS, Observation
 from studies.engine.calibration.plots import write_figures
 from studies.engine.calibration.waves import (
     DiscrepancyNeed,
@@ -27,6 +27,7 @@ from studies.engine.calibration.waves import (
 
 __all__ = [
     "CUTOFF",
+    "KINDS",
     "Diagnostics",
     "DiscrepancyNeed",
     "Emulator",

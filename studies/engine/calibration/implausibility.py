@@ -5,11 +5,12 @@ For output j at input x (Craig, Goldstein, Seheult & Smith 1997; Vernon, Goldste
 
     I_j(x) = |E[f_j(x)] − z_j| / sqrt(Var_emulator,j(x) + Var_discrepancy,j + Var_observation,j)
 
-and over outputs the largest, second- or third-largest I_j (the second and third tolerate one or
-two outputs the model cannot match without ruling out everything on them alone). A point is
-ruled out when the combined value exceeds the cut-off, 3 by default: Pukelsheim 1994, "The three
-sigma rule" (The American Statistician 48:88-91), shows that for any unimodal distribution at
-least 95 % of the probability lies within 3 standard deviations of the mean.
+(for a bound, ``at_least`` or ``at_most`` z, only the shortfall counts: :meth:`Observation.shortfall`)
+and over outputs the largest, second- or third-largest I_j (the second and third tolerate one or two
+outputs the model cannot match without ruling out everything on them alone). A point is ruled out
+when the combined value exceeds the cut-off, 3 by default: Pukelsheim 1994, "The three sigma rule"
+(The American Statistician 48:88-91), shows that for any unimodal distribution at least 95 % of the
+probability lies within 3 standard deviations of the mean.
 """
 
 from __future__ import annotations
@@ -40,13 +41,18 @@ def implausibility(mean: np.ndarray, var_emulator: np.ndarray, observations: Seq
     -------
     (n, m) implausibilities (dimensionless).
     """
-    mean = np.atleast_2d(mean)
-    z = np.array([o.z for o in observations])
+    gap = _shortfall(mean, observations)
     other = np.array([o.disc_var + o.obs_var for o in observations])
     total = np.atleast_2d(var_emulator) + other
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.abs(mean - z) / np.sqrt(total)
-    return np.where((total == 0) & (mean == z), 0.0, out)
+        out = gap / np.sqrt(total)
+    return np.where((total == 0) & (gap == 0), 0.0, out)
+
+
+def _shortfall(mean: np.ndarray, observations: Sequence[Observation]) -> np.ndarray:
+    """(n, m) distance of each mean from satisfying its observation, the outputs' units."""
+    mean = np.atleast_2d(np.asarray(mean, dtype=np.float64))
+    return np.column_stack([o.shortfall(mean[:, j]) for j, o in enumerate(observations)])
 
 
 def combine(per_output: np.ndarray, *, order: int = 1) -> np.ndarray:
@@ -75,14 +81,13 @@ def required_discrepancy_var(
 ) -> np.ndarray:
     """The smallest model-discrepancy variance under which each output is not ruled out at each point.
 
-    Solves ``|mean − z| / sqrt(var_emulator + d + obs_var) = cutoff`` for ``d``:
-    ``d = (mean − z)² / cutoff² − var_emulator − obs_var``, clipped at 0.
+    Solves ``g / sqrt(var_emulator + d + obs_var) = cutoff`` for ``d``, g the shortfall (``|mean − z|``
+    for an equality): ``d = g² / cutoff² − var_emulator − obs_var``, clipped at 0.
 
     Returns
     -------
     (n, m) variances in the outputs' units squared.
     """
-    mean = np.atleast_2d(mean)
-    z = np.array([o.z for o in observations])
     obs = np.array([o.obs_var for o in observations])
-    return np.maximum((mean - z) ** 2 / cutoff**2 - np.atleast_2d(var_emulator) - obs, 0.0)
+    gap = _shortfall(mean, observations)
+    return np.maximum(gap**2 / cutoff**2 - np.atleast_2d(var_emulator) - obs, 0.0)
