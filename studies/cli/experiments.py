@@ -411,8 +411,6 @@ def unknowns_search(
     if not 1 <= samples <= MAX_SAMPLES:
         raise UsageError(f"samples: expected an integer in [1, {MAX_SAMPLES}], got {samples}")
     check_seeds("seeds", seeds)
-    if order not in (1, 2, 3):
-        raise UsageError(f"order: expected 1, 2 or 3, got {order}")
     if not 0 <= seed < 2**32:
         raise UsageError(f"seed: expected an integer in [0, 2^32), got {seed}")
     run_on = execution(workers)
