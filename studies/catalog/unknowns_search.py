@@ -243,8 +243,9 @@ def calibrated_set(samples_csv: Path, limit: int | None = None) -> tuple[list[di
     consistent with :data:`TUNING`, where the study tuned; when neither exists, the points that
     agree with the most close-range observations (condition × side), however few; the
     description says which. ``limit`` keeps that many, spread evenly over the file's (Sobol')
-    order. Raises ``ValueError`` (naming the file) for a file that is not a search's output or
-    whose points agree with no observation at all.
+    order. Unknowns registered after the search ran (no column in the file) are held at their nominal
+    values, and the description names them. Raises ``ValueError`` (naming the file) for a file that
+    is not a search's output or whose points agree with no observation at all.
     """
     try:
         table = pd.read_csv(samples_csv)
@@ -254,10 +255,14 @@ def calibrated_set(samples_csv: Path, limit: int | None = None) -> tuple[list[di
             f"{samples_csv}: expected an unknowns-search samples.csv, cannot read it as CSV ({reason})"
         ) from None
     observations = [f"{c}_{s}" for c in CONDITIONS for s in SIDE_COLOURS]
-    need = ["consistent", f"consistent_{TUNING}", *observations, *search_space()]
+    need = ["consistent", f"consistent_{TUNING}", *observations]
     missing = [c for c in need if c not in table]
     if missing:
         raise ValueError(f"{samples_csv}: expected an unknowns-search samples.csv, missing column {missing[0]!r}")
+    space = search_space()
+    absent = [n for n in space if n not in table]  # registered after the search was run
+    for name in absent:
+        table[name] = [space[name].nominal] * len(table)
     agree = table[observations].astype(bool).sum(axis=1)
     if table.consistent.astype(bool).any():
         ok, which = table[table.consistent.astype(bool)], "consistent at every close-range condition"
@@ -272,10 +277,11 @@ def calibrated_set(samples_csv: Path, limit: int | None = None) -> tuple[list[di
         )
     else:
         raise ValueError(f"{samples_csv}: no point agrees with any close-range observation; nothing to predict from")
-    points = [{k: _plain(v) for k, v in row.items()} for row in ok[list(search_space())].to_dict("records")]
+    points = [{k: _plain(v) for k, v in row.items()} for row in ok[list(space)].to_dict("records")]
     if limit is not None and len(points) > limit:
         points = [points[i] for i in np.linspace(0, len(points) - 1, limit).round().astype(int)]
-    return points, f"{len(points)} of {len(ok)} points {which}"
+    held = f"; held at nominal, not varied by that search: {', '.join(absent)}" if absent else ""
+    return points, f"{len(points)} of {len(ok)} points {which}{held}"
 
 
 def apply_point(task: dict, values: dict) -> dict:

@@ -72,6 +72,20 @@ def test_calibrated_set_prefers_every_condition_then_the_tuning_one(tmp_path):
     assert "5 of 8 (condition × side)" in which and "not a calibration" in which
 
 
+def test_the_kept_search_serves_validate_with_later_unknowns_at_nominal():
+    """validate's default set (results/unknowns-search) predates some registry entries: they are held at
+    nominal and named, not an error (validate's default run had stopped on it)."""
+    header = set(pd.read_csv(unknowns_search.REFERENCE_SEARCH, nrows=0).columns)
+    space = unknowns_search.search_space()
+    later = [n for n in space if n not in header]
+    points, which = unknowns_search.calibrated_set(unknowns_search.REFERENCE_SEARCH, limit=2)
+    assert len(points) == 2 and set(points[0]) == set(space)
+    for name in later:
+        assert points[0][name] == space[name].nominal and name in which
+    shared = sorted(set(space) - set(later))
+    assert shared and all(n in header for n in shared)
+
+
 def test_calibrated_set_refuses_what_it_cannot_use(tmp_path):
     csv = tmp_path / "samples.csv"
     _samples_csv(csv, [False, False], [False, False])
