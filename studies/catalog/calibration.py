@@ -47,7 +47,9 @@ from studies.engine.calibration import (
     to_json,
     write_figures,
 )
+from studies.engine.calibration.plots import ranked_inputs
 from studies.engine.frame_task import FrameTask
+from studies.engine.report import Report
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.unknowns import Unknown, apply
 
@@ -384,6 +386,7 @@ def run(
     atomic_write_bytes(out / "nroy.csv", nroy.to_csv(index=False, float_format="%.6g").encode())
     write_figures(result, out)
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed), indent=2).encode())
+    write_report(result, observed, out)
     return result
 
 
@@ -430,6 +433,162 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
         ],
         "inputs": list(result.space.names),
     }
+
+
+PINNED = 0.8
+"""An unknown counts as narrowed when the NROY set keeps less than this share of its range (5-95 % span;
+for a categorical one, of its choices)."""
+
+
+def input_table(result: HistoryMatch) -> pd.DataFrame:
+    """Per input, most constraining first (:func:`studies.engine.calibration.plots.ranked_inputs`): its
+    range, and the NROY set's 5-95 % span (continuous) or the choices it keeps (categorical), with
+    the share of the range that span covers."""
+    q = result.nroy_points
+    rows = []
+    for i in ranked_inputs(result):
+        inp = result.space.inputs[i]
+        unit = f" {inp.unit}" if inp.unit else ""
+        if inp.categorical:
+            kept = sorted({str(v) for v in inp.from_unit(q[:, i])}) if len(q) else []
+            every = len(kept) == len(inp.choices) and len(kept) > 3
+            choices = f"{len(inp.choices)} choices" if len(inp.choices) > 3 else " | ".join(map(str, inp.choices))
+            rows.append(
+                {
+                    "input": inp.name,
+                    "range": choices,
+                    "NROY": f"all {len(kept)}" if every else " | ".join(kept) if kept else "–",
+                    "share kept": len(kept) / len(inp.choices),
+                }
+            )
+            continue
+        if len(q):
+            lo_q, hi_q = np.percentile(q[:, i], [5, 95])
+            lo, hi = inp.from_unit(np.array([lo_q, hi_q]))
+            kept, share = f"{lo:.3g}-{hi:.3g}{unit}", float(hi_q - lo_q) / 0.9
+        else:
+            kept, share = "–", math.nan
+        scale = ", log" if inp.log else ""
+        rows.append({"input": inp.name, "range": f"{inp.low:g}-{inp.high:g}{unit}{scale}", "NROY": kept,
+                     "share kept": share})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) -> Path:
+    """``report.html``: what the match found, in words first, then the figures and tables (waves,
+    inputs, observations with the discrepancy each needs, emulator diagnostics)."""
+    out = Path(out)
+    frames = len({o.frame for o in observed})
+    runs = sum(len(w.design) for w in result.waves)
+    rep = Report("Calibration by history matching: the unknowns against what the study saw at close range")
+    lead = [
+        f"{len(result.observations)} observed outputs on {frames} close-range frames (docs/source-study.md §10: the "
+        f"150 mm threshold tuning and the primary test's 1 m frames), {result.space.dim} unknowns; "
+        f"{len(result.waves)} waves of {result.settings.n_per_wave} points ({runs} points simulated); a point is "
+        f"ruled out when the {_ordinal(result.settings.order)} implausibility over the outputs exceeds "
+        f"{result.settings.cutoff:g}. Stopped: {result.stopped}.",
+    ]
+    if len(result.nroy_points):
+        table = input_table(result)
+        pinned = table[table["share kept"] < PINNED]
+        lead.append(
+            f"Not ruled out (NROY): {result.nroy_fraction:.3g} of the space ({len(result.nroy_points)} of "
+            f"{result.settings.n_reference} reference points). "
+            + (
+                "Narrowed: " + "; ".join(f"{r.input} to {r.NROY} (range {r.range})" for r in pinned.itertuples())
+                if len(pinned)
+                else "No unknown is narrowed"
+            )
+            + f"; the other {len(table) - len(pinned)} keep at least {PINNED:.0%} of their range."
+        )
+    else:
+        alone = [d.observation for d in result.discrepancy if d.rules_out_alone]
+        lead.append(
+            "Nothing survives at the stated discrepancies"
+            + (f": {', '.join(alone)} each rule out every point alone." if alone else ".")
+            + " The discrepancy table says how much each observation would need."
+        )
+    rep.lead(lead)
+    for name, caption in (
+        ("outputs", "What the simulator gave at each wave's points (dots, a colour per wave) beside what the study "
+         "saw (black line) and the band the cut-off accepts with no emulator error (grey: z ± 3σ, σ² the "
+         "observation and discrepancy variances; for a bound, its accepted side)."),
+        ("nroy_fraction", "Share of the space not ruled out after each wave."),
+        ("nroy_marginals", "Per unknown, most constraining first: the lowest implausibility reachable with it at "
+         "each value (blue line; red dashes: the cut-off) and the share of points there not ruled out (green "
+         "bars, right axis)."),
+        ("nroy_pairs", "Pairs of the most constraining unknowns."),
+        ("loo_errors", "Emulator diagnostics: leave-one-out standardised errors (about 95 % should lie in ±2)."),
+    ):  # fmt: skip
+        path = out / f"{name}.png"
+        if path.is_file():
+            rep.image_png(path.read_bytes(), caption)
+    rep.heading("Waves")
+    rep.table(
+        pd.DataFrame(
+            [
+                {
+                    "wave": w.index,
+                    "points": len(w.design),
+                    "failed": int(np.isnan(w.outputs).any(axis=1).sum()),
+                    "region share": w.region_fraction,
+                    "NROY share": w.nroy_fraction,
+                }
+                for w in result.waves
+            ]
+        )
+    )
+    rep.heading("Unknowns, most constraining first")
+    rep.table(input_table(result), formats={"share kept": "{:.2f}"})
+    rep.heading("Observations and the discrepancy each needs")
+    need = {d.observation: d for d in result.discrepancy}
+    rep.table(
+        pd.DataFrame(
+            [
+                {
+                    "observation": o.observation.name,
+                    "kind": o.observation.kind,
+                    "z": o.observation.z,
+                    "obs sd": math.sqrt(o.observation.obs_var),
+                    "stated disc. sd": math.sqrt(o.observation.disc_var),
+                    "needed alone": need[o.observation.name].alone_sd if o.observation.name in need else math.nan,
+                    "needed jointly": need[o.observation.name].joint_sd if o.observation.name in need else math.nan,
+                    "rules out all alone": bool(need[o.observation.name].rules_out_alone)
+                    if o.observation.name in need
+                    else False,
+                }
+                for o in observed
+            ]
+        ),
+        caption="needed: the smallest discrepancy sd under which some point (alone) or the best point overall "
+        "(jointly) is not ruled out by that observation, from the last wave's emulators",
+    )
+    if result.waves:
+        last = result.waves[-1]
+        rep.heading(f"Emulators of wave {last.index}")
+        rep.table(
+            pd.DataFrame(
+                [
+                    {
+                        "output": d.output,
+                        "LOO 95 % coverage": d.coverage_95,
+                        "LOO 68 % coverage": d.coverage_68,
+                        "LOO rmse": d.rmse,
+                    }
+                    for d in last.loo
+                ]
+            )
+        )
+    rep.text(
+        "Records: history.json (every wave, its emulators and runs), nroy.csv (the points not ruled out), "
+        "summary.json; the frames in tasks/.",
+        note=True,
+    )
+    return rep.write(out / "report.html")
+
+
+def _ordinal(k: int) -> str:
+    return {1: "largest", 2: "second-largest", 3: "third-largest"}[k]
 
 
 def quick_settings(settings: Settings) -> Settings:

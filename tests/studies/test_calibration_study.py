@@ -124,6 +124,11 @@ def test_a_history_match_is_written_resumed_and_recovers_a_planted_answer(tmp_pa
     summary = json.loads((out / "summary.json").read_text(), parse_constant=pytest.fail)
     assert [w["wave"] for w in summary["waves"]] == [1, 2, 3] and summary["nroy_points"] == len(lit)
     assert (out / "nroy.csv").read_text().splitlines()[0].split(",") == list(result.space.names)
+    table = calibration.input_table(result)
+    assert table.input[0] == "lit_face_diameter"  # the one input the planted outputs depend on, ranked first
+    assert float(table["share kept"][0]) == pytest.approx(2 * half / 5, abs=0.1)
+    page = (out / "report.html").read_text()
+    assert "Not ruled out (NROY)" in page and page.count("data:image/png") == 5
     before = len(calls)
     again = calibration.run(out, settings=settings, seeds=1, observations=observations)
     assert len(calls) == before and len(again.waves) == 3  # resumed: every wave was on record

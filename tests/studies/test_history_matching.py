@@ -37,6 +37,7 @@ from studies.engine.calibration import (
     write_figures,
 )
 from studies.engine.calibration.design import sobol
+from studies.engine.calibration.plots import FIGURES, ranked_inputs
 from studies.engine.unknowns import load_unknowns
 
 SPACE = InputSpace((Input("x1", 0.0, 1.0), Input("x2", -1.0, 1.0), Input("x3", 0.1, 10.0, log=True)))
@@ -273,9 +274,20 @@ def test_inputs_map_like_the_unknowns_registry():
         assert inp.log == (u.kind == "loguniform") and inp.categorical == (u.kind == "choice")
 
 
+def test_the_constraining_input_is_ranked_first():
+    """Only x2 enters the output: its 1-D implausibility profile rises, the others' stay flat."""
+    result = history_match(
+        lambda values: np.array([[v["x2"] ** 2] for v in values]),
+        SPACE,
+        [Observation("y", 0.25, 0.0, 0.05**2)],
+        settings=Settings(n_per_wave=12, min_waves=1, max_waves=1, n_reference=1024, n_restarts=1),
+    )
+    assert ranked_inputs(result)[0] == 1
+
+
 def test_figures_have_deterministic_bytes(planted, tmp_path):
     first = write_figures(planted, tmp_path / "a")
     second = write_figures(planted, tmp_path / "b")
-    assert [p.name for p in first] == ["nroy_pairs.png", "nroy_fraction.png", "loo_errors.png"]
+    assert [p.name for p in first] == [f"{name}.png" for name in FIGURES]
     for a, b in zip(first, second, strict=True):
         assert a.read_bytes() == b.read_bytes() and a.stat().st_size > 5000
