@@ -318,7 +318,7 @@ def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str,
                     "trackers": ["thesis"],
                     "estimators": ["thesis"],
                     **condition["task"],
-                    "tags": {"point": index, "frame": o.frame},
+                    "tags": {"point": index, "observed": o.frame},
                 }
                 if scenario["camera"].startswith("canon-t6"):
                     task["exposure"] = dict(T6_EXPOSURE)
@@ -336,7 +336,7 @@ def simulator(out: Path, observed: Sequence[Observed], space: dict[str, Unknown]
         rows = run_frames(tasks(points, observed, space, seeds), out, execution, description="calibration frames")
         frame = pd.DataFrame(rows)
         result = np.full((len(points), len(observed)), np.nan)
-        for (index, name), g in frame.groupby(["point", "frame"]):
+        for (index, name), g in frame.groupby(["point", "observed"]):
             records = g.to_dict("records")
             for j, o in enumerate(observed):
                 if o.frame == name:

@@ -69,6 +69,15 @@ tracker counts every colour's blobs (``side_blobs`` of a side after the first wi
 :mod:`pipeline.mask_measures`; issue 25)."""
 
 
+ROW_FIELDS = frozenset(
+    {"seed", "frame", "nominal_range_m", "nominal_yaw_deg", "exposure_s", "analog_gain", "iso", "tracker",
+     "thresholds", "estimator", "detected", "side_detected", "side_correct", "numbering_correct", "side_blobs",
+     "blobs", "reason", "failure", "frame_s"}
+)  # fmt: skip
+"""Fields every frame's rows carry that a task's ``tags`` must not shadow (a tag ``frame`` had replaced
+the row's ``frame``, full or crop, and the other way round)."""
+
+
 def frame_scenario(task: FrameTask | dict) -> Scenario:
     """The :class:`Scenario` of a task (validates it)."""
     task = FrameTask.coerce(task)
@@ -151,6 +160,9 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     """Simulate one frame task (see module docstring) and score every detector on it."""
     t0 = time.perf_counter()
     task = FrameTask.coerce(task)
+    clash = sorted(set(task.tags or {}) & ROW_FIELDS)
+    if clash:
+        raise ValueError(f"tags.{clash[0]}: a row field of every frame; expected another tag name")
     frame = capture_frame(task)
     scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
     truth_uv = marker_pixels(camera, scenario)

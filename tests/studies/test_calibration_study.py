@@ -73,14 +73,14 @@ def test_a_point_becomes_frame_tasks_with_every_unknown_set():
     point = space.values(np.full((1, space.dim), 0.9))[0]
     tasks = calibration.tasks([point], observed, unknowns, seeds=2)
     assert len(tasks) == 2 * len({o.frame for o in observed})  # a frame's outputs share its frames
-    webcam = [t for t in tasks if t["tags"]["frame"] == "webcam_150mm_green_lit"]
+    webcam = [t for t in tasks if t["tags"]["observed"] == "webcam_150mm_green_lit"]
     assert len(webcam) == 2 and all(FrameTask.coerce(t).is_full_frame for t in webcam)
     sc = webcam[0]["scenario"]
     assert sc["camera"] == point["tuning_webcam"] and sc["environment"] == "lit-room" and sc["beacon"] == "v1"
     assert sc["led_current_mA"] == pytest.approx(point["led_drive_v1_green"])
     assert sc["data"]["leds.green.luminous_intensity_cd"] == pytest.approx(point["led_intensity_green"])
     assert sc["data"]["beacons.v1.lit_face_diameter_mm"] == pytest.approx(point["lit_face_diameter_v1"])
-    t6 = next(t for t in tasks if t["tags"]["frame"] == "t6_10mm_1m_30deg")
+    t6 = next(t for t in tasks if t["tags"]["observed"] == "t6_10mm_1m_30deg")
     assert t6["scenario"]["side"] == point["primary_test_side"]  # the primary test's side is the point's
     assert t6["scenario"]["led_current_mA"] == pytest.approx(point["led_drive_v2_primary"])
     assert t6["scenario"]["yaw_deg"] == 30.0 and t6["exposure"]["iso"] == 6400

@@ -96,3 +96,12 @@ def test_noise_seed_is_one_per_frame_and_shared_by_what_only_scores_it():
     assert len(seeds) == 6 and all(0 <= s < 2**63 for s in seeds)
     same = {"trackers": ["thesis"], "estimators": ["best"], "tags": {"test": "x"}, "reference_camera": True}
     assert noise_seed({**base, **same}) == noise_seed(base)
+
+
+def test_a_tag_that_would_shadow_a_row_field_is_refused_before_any_work(monkeypatch):
+    """A tag named like a row field (``frame``: full or crop) would silently replace it, or be replaced."""
+    from studies.engine import frame
+
+    monkeypatch.setattr(frame, "capture_frame", lambda task: pytest.fail("rendered before the check"))
+    with pytest.raises(ValueError, match=r"tags\.frame: a row field"):
+        frame.simulate_frame({"scenario": {"range_m": 2.0}, "seed": 0, "tags": {"frame": "webcam_150mm_red_dark"}})
