@@ -17,6 +17,10 @@ at the markers' true positions and for one colour's boxes, on the tracker's own 
     *closed* mask (before the final erosion) at the marker; 0 where the mask has nothing there.
     The final erosion keeps a region only if it is at least ``survivor_height_px`` tall
     (13 px with the study's kernel), so the difference says how near a blob came to vanishing.
+``merged_markers``
+    Markers whose closed region holds another marker too (the close joined them: "blob merging").
+``lost_markers``
+    Markers with no pixel of the final (eroded) mask in their closed region: no blob can come of them.
 
 The close is computed in a window around the markers grown by its reach; a region larger than
 the window (a lit wall caught by the near-white "red" box) is measured as far as the window goes,
@@ -35,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from pipeline.angles import Intrinsics, resized_pixel
 from pipeline.thesis_tracker import (
     CLOSE_KERNEL,
+    ERODE_KERNEL,
     HsvBox,
     ThesisTrackerSettings,
     close_reach,
@@ -64,12 +69,17 @@ class MaskMeasures:
         Mean height of the closed mask's region at each marker, processed px.
     survivor_height_px
         Height a closed region needs to survive the final erosion, processed px.
+    merged_markers, lost_markers
+        Markers sharing their closed region with another one; markers whose region the erosion removes
+        (or that have none).
     """
 
     box_distance: float
     in_box_fraction: float
     closed_height_px: float
     survivor_height_px: int
+    merged_markers: int = 0
+    lost_markers: int = 0
 
 
 def box_distance(hsv: ArrayLike, boxes: list[HsvBox]) -> NDArray[np.float64]:
@@ -141,13 +151,16 @@ def marker_mask_measures(
     y0 = max(math.floor(np.min(vr - radii)) - reach, 0)
     y1 = min(math.ceil(np.max(vr + radii)) + reach + 1, h)
     if x1 <= x0 or y1 <= y0 or not boxes:
-        return MaskMeasures(math.nan, 0.0, 0.0, survivor)  # no marker in the image, or no box
+        return MaskMeasures(math.nan, 0.0, 0.0, survivor, 0, len(ur))  # no marker in the image, or no box
     window = hsv[y0:y1, x0:x1]
     closed = cv2.morphologyEx(
         in_range_mask(window, boxes), cv2.MORPH_CLOSE, CLOSE_KERNEL, iterations=s.close_iterations
     )
     _, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    eroded = cv2.erode(closed, ERODE_KERNEL, iterations=s.erode_iterations)
+    surviving = set(np.unique(labels[eroded > 0]).tolist()) - {0}
     gy, gx = np.mgrid[y0:y1, x0:x1]
+    regions = []
     for u, v, r in zip(ur, vr, radii, strict=True):
         core = (gx - u) ** 2 + (gy - v) ** 2 <= r * r
         if not core.any():  # a core between pixel centres: its nearest pixel
@@ -156,6 +169,16 @@ def marker_mask_measures(
         core_px.append(window[core])
         found = labels[core]
         found = found[found > 0]
-        heights.append(float(stats[np.bincount(found).argmax(), cv2.CC_STAT_HEIGHT]) if found.size else 0.0)
+        region = int(np.bincount(found).argmax()) if found.size else 0
+        regions.append(region)
+        heights.append(float(stats[region, cv2.CC_STAT_HEIGHT]) if region else 0.0)
     dist = box_distance(np.concatenate(core_px), boxes)
-    return MaskMeasures(float(np.median(dist)), float(np.mean(dist == 0)), float(np.mean(heights)), survivor)
+    shared = [r and regions.count(r) > 1 for r in regions]
+    return MaskMeasures(
+        box_distance=float(np.median(dist)),
+        in_box_fraction=float(np.mean(dist == 0)),
+        closed_height_px=float(np.mean(heights)),
+        survivor_height_px=survivor,
+        merged_markers=int(sum(shared)),
+        lost_markers=int(sum(r not in surviving for r in regions)),
+    )

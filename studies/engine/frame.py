@@ -65,8 +65,8 @@ beyond ~19 m, V1 beyond ~12 m had failed as "no fit"); scenarios may carry data-
 tracker counts every colour's blobs (``side_blobs`` of a side after the first with exactly 5 had been
 0), its answer unchanged (issue 25).
 9: the study's tracker's rows carry its near-miss measures of the side's colour at the true markers
-(``side_box_distance``, ``side_in_box_fraction``, ``side_closed_height_px``, ``survivor_height_px``:
-:mod:`pipeline.mask_measures`; issue 25)."""
+(``side_box_distance``, ``side_in_box_fraction``, ``side_closed_height_px``, ``survivor_height_px``,
+``side_markers_merged``, ``side_markers_lost``: :mod:`pipeline.mask_measures`; issue 25)."""
 
 
 ROW_FIELDS = frozenset(
@@ -250,6 +250,8 @@ def _mask_measures(tracker: str, image_bgr, intrinsics, uv, radii, side: str, se
         "side_in_box_fraction": m.in_box_fraction,
         "side_closed_height_px": m.closed_height_px,
         "survivor_height_px": m.survivor_height_px,
+        "side_markers_merged": m.merged_markers,
+        "side_markers_lost": m.lost_markers,
     }
 
 

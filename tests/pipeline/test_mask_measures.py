@@ -71,3 +71,16 @@ def test_the_survivor_height_decides_the_trackers_blobs(diameter):
     found = thesis_track(image, WEBCAM)
     green = sum(b.colour == "green" for b in found.blobs)
     assert (green == 5) == (m.closed_height_px >= m.survivor_height_px)
+
+
+def test_markers_closer_than_the_close_reach_merge_and_small_ones_are_lost():
+    """Two discs 14 px apart (centre to centre, 21 px wide) join under the close (it bridges gaps up to
+    ~20 px); discs under the survivor height have no eroded pixel."""
+    uv = UV.copy()
+    uv[1] = uv[0] + [14.0, 0.0]  # markers 1 and 2 overlap after closing
+    image = _discs((480, 640), uv, 21, (77, 100, 220))
+    m = marker_mask_measures(image, WEBCAM, uv, [3.0] * 5, "green")
+    assert m.merged_markers == 2 and m.lost_markers == 0
+    small = _discs((480, 640), UV, 9, (77, 100, 220))
+    m = marker_mask_measures(small, WEBCAM, UV, [3.0] * 5, "green")
+    assert m.merged_markers == 0 and m.lost_markers == 5
