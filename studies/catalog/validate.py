@@ -8,21 +8,24 @@ and camera settings (T6 ISO 6400, 1/60 s; webcams automatic):
   V2's 140 mm cross does not);
 * range test: C270 and T6 + 18 mm at 2, 5, 7 and 10 m, room lights on and off, V1 and V2;
 * primary test: V2, T6 with the 18 mm and 10 mm lenses, 1-5 m × 0-30° yaw, lights off;
-* weight experiment: T6 + 18 mm at 1 m, QUEST with equal weights (0.25 each) and the tuned
-  (0.05, 0.05, 0.45, 0.45), each without rectification and rectified with alpha 0 and 1;
+* weight experiment: T6 with the 18 mm and 10 mm lenses at 1 m over 0-30° yaw in 5° (0° and 30°
+  quick), QUEST with equal weights (0.25 each) and the tuned (0.05, 0.05, 0.45, 0.45), each without
+  rectification and rectified with alpha 0 and 1 (at yaw 0 a relative yaw error is undefined);
 * V1 vs V2: the side-to-centre marker flux ratio at 2 m (``v1_vs_v2.csv``).
 
 Frames are the camera's whole saved frame (``full_frame``), which the study's tracker scales
 to 50 % (the T6) as the study processed them: every false blob a frame holds is there.
 
 Markers as built: foam + one sheet of paper. What the study did not record (the dimmer's
-setting, paper colour, webcam, lens focus, glare, ISP, …) comes from the calibrated set of an
-unknowns search (``calibration``, :mod:`studies.catalog.unknowns_search`): every test runs at
-each of its points. Without one, the unknowns stay nominal (matched paper, the datasheet
-current). Red side unless the test says each colour. ``validation.csv`` has one row per
-tested condition (means over seeds and points; ``detected_low``/``high`` span the Wilson 95 %
-intervals of every point, i.e. an interval over the set and the seeds; ``points`` counts
-them); the report marks the study's headline conclusions agree/disagree from those rows.
+setting, paper colour, webcam, lens focus, glare, ISP, …) comes from a set of points
+(``calibration``, :mod:`studies.catalog.prediction_set`): a history match's NROY set (the primary
+test's side is then the point's) or an unknowns search's calibrated set; every test runs at each
+of its points. Without one, the unknowns stay nominal (matched paper, the datasheet current).
+Red side unless the test says each colour (or the point gives the primary test's side).
+``validation.csv`` has one row per tested condition (means over seeds and points;
+``detected_low``/``high`` span the Wilson 95 % intervals of every point, i.e. an interval over the
+set and the seeds; ``points`` counts them; ``extra_blobs``/``merged``/``lost_fraction`` say why
+frames were missed); the report marks the study's headline conclusions agree/disagree from those rows.
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, der
 from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
-from studies.catalog.unknowns_search import WEBCAMS, apply_point, calibrated_set
+from studies.catalog import prediction_set
+from studies.catalog.unknowns_search import WEBCAMS
 from studies.engine import strict_json
 from studies.engine.colour_reach import HIGHLIGHTS, LEVELS, reach
 from studies.engine.frame import capture_frame
@@ -109,9 +113,22 @@ def test_conditions(quick: bool) -> list[tuple[str, dict]]:
                         },
                     )
                 )
-    weights = {"beacon": "v2", "side": "red", "range_m": 1.0, "yaw_deg": 0.0, "camera": "canon-t6-18mm"}
-    out.append(("weights", {**weights, "environment": "dark-room", **AS_BUILT}))
+    for cam in ("canon-t6-18mm", "canon-t6-10mm"):
+        for y in yaws:  # the study's weight figures sweep 0-30° at 1 m with both lenses
+            weights = {"beacon": "v2", "side": "red", "range_m": 1.0, "yaw_deg": y, "camera": cam}
+            out.append(("weights", {**weights, "environment": "dark-room", **AS_BUILT}))
     return out
+
+
+PRIMARY_TESTS = ("primary", "weights")
+"""Tests on the primary test's set-up, whose side the study does not state (a calibration's point says)."""
+
+
+def default_points(calibration: Path) -> int:
+    """Points a prediction runs at by default: 20 of a calibration's NROY set (the spread of what
+    survives), 2 of an unknowns search's set."""
+    header = pd.read_csv(calibration, nrows=0).columns
+    return 2 if "consistent" in header else 20
 
 
 WEIGHT_VARIANTS = tuple(itertools.product(("tuned", "equal"), (None, {"alpha": 0.0}, {"alpha": 1.0})))
@@ -132,16 +149,18 @@ def run(
     (:func:`pipeline.thesis_tracker.derive_hsv_ranges`); the range and primary tests are
     then scored with the study's printed thresholds and with these derived ones.
 
-    ``calibration``: an unknowns search's ``samples.csv``; every test then runs at each of
-    ``points`` of its calibrated set (:func:`studies.catalog.unknowns_search.calibrated_set`;
-    default 2) and the intervals cover the set and the seeds. Without it, the
+    ``calibration``: a history match's ``nroy.csv`` or an unknowns search's ``samples.csv``
+    (:func:`studies.catalog.prediction_set.load`); every test then runs at each of ``points`` of
+    that set (default :func:`default_points`) and the intervals cover the set and the seeds. Without it, the
     unknowns stay at their nominal values (one point).
     """
     if points is not None and points < 1:
         raise ValueError(f"points: expected an integer >= 1, got {points!r}")
-    calibrated, which = [None], "none: the unknowns at their nominal values"
+    chosen, which = None, "none: the unknowns at their nominal values"
     if calibration is not None:
-        calibrated, which = calibrated_set(Path(calibration), points or 2)
+        chosen = prediction_set.load(Path(calibration), points or default_points(Path(calibration)))
+        which = chosen.which
+    calibrated = list(range(len(chosen.points))) if chosen is not None else [None]
     pairs = test_conditions(quick)
     Path(out).mkdir(parents=True, exist_ok=True)
     options = StudyOptions(
@@ -160,14 +179,19 @@ def run(
                 frame_tasks([cond], options, trackers=["thesis"], estimators=["thesis"]), range(len(calibrated))
             ):
                 t = {**t, "full_frame": True}  # the whole saved frame, as the study processed it
-                if calibrated[point] is not None:
-                    t = apply_point(t, calibrated[point])
+                side_of_test = t["scenario"]["side"]
+                if chosen is not None:
+                    if test in PRIMARY_TESTS and chosen.primary_side(point) is not None:
+                        t = {**t, "scenario": {**t["scenario"], "side": chosen.primary_side(point)}}
+                        side_of_test = "primary"  # the point's: the study does not say which side
+                    t = chosen.apply(t, point)
                 if variants:
                     t["thesis_hsv_variants"] = variants
                 settings = WEIGHT_VARIANTS if test == "weights" else (("tuned", None),)
                 for weights, rectification in settings:
                     label = "none" if rectification is None else f"alpha {rectification['alpha']:g}"
-                    task = {**t, "tags": {"test": test, "weights": weights, "rectification": label, "point": point}}
+                    tags = {"test": test, "weights": weights, "rectification": label, "point": point or 0}
+                    task = {**t, "tags": {**tags, "side_of_test": side_of_test}}
                     if weights != "tuned":
                         task["quest_weights"] = weights
                     if rectification is not None:
@@ -226,6 +250,8 @@ def validation_table(frame):
     """One row per tested condition: means over the seeds and the calibrated points, intervals
     over both (:func:`_over_points`)."""
     frame = frame.assign(point=frame["point"] if "point" in frame else 0)
+    if "side_of_test" in frame:  # the primary test's side, when a point chose it, is shown as "primary"
+        frame = frame.assign(side=frame["side_of_test"].fillna(frame["side"]))
     per_point = []
     for key, g in frame.groupby([*CONDITION_KEYS, "point"], sort=False):
         rec = dict(zip([*CONDITION_KEYS, "point"], key, strict=True))
@@ -233,6 +259,7 @@ def validation_table(frame):
         detected = [bool(r["detected"]) for r in recs]
         # merged or lost: not detected, and the tracker found fewer than five blobs of the side's colour
         merged = [not r["detected"] and not (r["side_blobs"] >= 5) for r in recs]
+        failures = _failure_kinds(recs)
         colour_ok = [bool(r["side_correct"]) for r in recs if r["detected"]]
         per_point.append(
             {
@@ -245,6 +272,7 @@ def validation_table(frame):
                 "yaw_deg": rec["nominal_yaw_deg"],
                 "detected_fraction": float(np.mean(detected)),
                 "merged_or_lost_fraction": float(np.mean(merged)),
+                **failures,
                 "colour_correct_fraction": float(np.mean(colour_ok)) if colour_ok else 0.0,
                 "range_est_m": float(np.nanmean(g.range_est_m)) if g.range_est_m.notna().any() else np.nan,
                 "yaw_est_deg": float(np.nanmean(g.yaw_est_deg)) if g.yaw_est_deg.notna().any() else np.nan,
@@ -256,6 +284,23 @@ def validation_table(frame):
             }
         )
     return _over_points(pd.DataFrame(per_point))
+
+
+def _failure_kinds(recs: list[dict]) -> dict:
+    """Why frames were missed, as fractions of all frames (:mod:`pipeline.mask_measures`, at the true
+    markers): ``extra_blobs`` (more than five blobs of the side's colour: other sides' markers seen
+    through the housing, reflections), ``merged`` (the close joined two markers' regions), ``lost``
+    (a marker left no blob: out of the box, or too small for the erosion). A missed frame may have
+    several; NaN for rows without the measures (frames of an older version)."""
+    missed = [r for r in recs if not r["detected"]]
+    if any(r.get("side_markers_merged") is None for r in missed):
+        return {"extra_blobs_fraction": np.nan, "merged_fraction": np.nan, "lost_fraction": np.nan}
+    n = len(recs)
+    return {
+        "extra_blobs_fraction": sum((r["side_blobs"] or 0) > 5 for r in missed) / n,
+        "merged_fraction": sum(r["side_markers_merged"] > 0 for r in missed) / n,
+        "lost_fraction": sum(r["side_markers_lost"] > 0 for r in missed) / n,
+    }
 
 
 def _intervals(detected: list[bool], g) -> dict:
@@ -425,7 +470,8 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     verdict(
         "Tuning the QUEST weights to (0.05, 0.05, 0.45, 0.45) improved the attitude over equal weights",
         bool(errors["tuned"].mean() < errors["equal"].mean()) if testable else None,
-        f"mean |yaw error| at 1 m: tuned {errors['tuned'].mean():.2f}° ({counts['tuned']} frames), "
+        f"mean |yaw error| at 1 m over 0-30°, both lenses: tuned {errors['tuned'].mean():.2f}° "
+        f"({counts['tuned']} frames), "
         f"equal {errors['equal'].mean():.2f}° ({counts['equal']} frames)"
         if testable
         else f"too few detections at 1 m to compare the weights on ({counts['tuned']} tuned, {counts['equal']} equal)",
@@ -511,7 +557,7 @@ def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.Data
         "Study tracker (HSV thresholds, morphology, exactly-5-blobs rule), inverse perspective and QUEST "
         "(Gibbs shortcut, weights 0.05/0.05/0.45/0.45); T6 at ISO 6400, 1/60 s; webcams automatic. Markers "
         "as built: foam + 1 sheet of paper. Each frame is the camera's whole saved frame, scaled to 50 % for the "
-        f"T6 as the study processed it. Calibrated set (the unknowns, by `beacon-sim unknowns-search`): {calibrated}. "
+        f"T6 as the study processed it. Points of the unknowns predicted from: {calibrated}. "
         "Intervals: detected_low/high spans the Wilson 95 % intervals over the seeds of every calibrated point "
         "(the interval over the set and the seeds); *_est_low/high are the lowest and highest estimate seen; "
         "`points` is how many calibrated points a row covers."

@@ -9,10 +9,10 @@ from typing import Annotated
 
 import typer
 
-from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, SEQUENTIAL, STUDIES
+from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, SEQUENTIAL, STUDIES, prediction_set
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
-from studies.catalog.unknowns_search import REFERENCE_SEARCH, calibrated_set
+from studies.catalog.unknowns_search import REFERENCE_SEARCH
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list
 from studies.cli.out_folder import prepare_out_dir
@@ -139,13 +139,17 @@ def validate(
         Path,
         typer.Option(
             "--calibration",
-            help="samples.csv of an unknowns search: predict from its calibrated set.",
+            help="nroy.csv of calibrate-unknowns (its NROY set) or samples.csv of an unknowns search: predict "
+            "from that set.",
             show_default="results/unknowns-search/samples.csv",
         ),
     ] = REFERENCE_SEARCH,
     nominal: Annotated[bool, typer.Option("--nominal", help="Ignore --calibration: the unknowns at nominal.")] = False,
     points: Annotated[
-        int | None, typer.Option("--points", help="Calibrated points to run each test at.", show_default="2")
+        int | None,
+        typer.Option(
+            "--points", help="Points of the set to run each test at.", show_default="20 of an NROY set, 2 of a search's"
+        ),
     ] = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
@@ -155,9 +159,11 @@ def validate(
     if points is not None and points < 1:
         raise UsageError(f"points: expected an integer >= 1, got {points}")
     if not nominal and not calibration.is_file():
-        raise UsageError(f"calibration: expected an unknowns-search samples.csv, {calibration} is not a file")
+        raise UsageError(
+            f"calibration: expected a calibration's nroy.csv or a search's samples.csv, {calibration} is not a file"
+        )
     try:
-        calibrated_set(calibration) if not nominal else None
+        prediction_set.load(calibration) if not nominal else None
     except ValueError as e:
         raise UsageError(str(e)) from None
     except OSError as e:  # unreadable

@@ -306,3 +306,28 @@ def test_colour_reach_spans_at_the_ends_of_the_exposures_tried_say_so():
 def test_degrees_in_words_say_no_detection_for_an_empty_mean():
     assert validate._degrees(21.716) == "21.72°"
     assert validate._degrees(float(pd.Series([], dtype=float).mean())) == "no detection"  # no frame detected
+
+
+def test_a_calibrations_nroy_set_is_a_prediction_set(tmp_path):
+    """validate --calibration nroy.csv: each point's own dimmer per V1 side, the primary side's for V2, and
+    the primary test's side from the point; an empty NROY set or a foreign file is one line."""
+    from studies.catalog import calibration, prediction_set
+
+    space = calibration.search_space(calibration.load_observations())
+    path = tmp_path / "nroy.csv"
+    pd.DataFrame(sample(space, 3, seed=2)).to_csv(path, index=False)
+    chosen = prediction_set.load(path, limit=2)
+    assert chosen.source == prediction_set.CALIBRATION and len(chosen.points) == 2
+    p0, p1 = chosen.points
+    v1 = chosen.apply({"scenario": {"beacon": "v1", "side": "green", "camera": "logitech-c270"}, "seed": 0}, 0)
+    assert v1["scenario"]["led_current_mA"] == pytest.approx(p0["led_drive_v1_green"])
+    v2 = chosen.apply({"scenario": {"beacon": "v2", "side": "blue", "camera": "canon-t6-18mm"}, "seed": 0}, 1)
+    assert v2["scenario"]["led_current_mA"] == pytest.approx(p1["led_drive_v2_primary"])
+    assert v2["camera_overrides"]["effects.focus_distance_m"] == pytest.approx(p1["focus_distance"])
+    assert chosen.primary_side(1) == p1["primary_test_side"] and validate.default_points(path) == 20
+    pd.DataFrame(columns=list(space)).to_csv(path, index=False)
+    with pytest.raises(ValueError, match="NROY set is empty"):
+        prediction_set.load(path)
+    pd.DataFrame({"x": [1.0]}).to_csv(path, index=False)
+    with pytest.raises(ValueError, match=r"expected a calibration's nroy\.csv .* missing column"):
+        prediction_set.load(path)

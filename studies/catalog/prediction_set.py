@@ -1,0 +1,123 @@
+"""The points of the unknowns a prediction is made from: a calibration's NROY set, or an unknowns search's.
+
+``validate`` (and any study that predicts "from what the calibration left") reads one file:
+
+* a history match's ``nroy.csv`` (``beacon-sim calibrate-unknowns``, :mod:`studies.catalog.calibration`):
+  the points not ruled out, one column per calibrated unknown. The primary test's side is the
+  point's ``primary_test_side``; V1's sides have their own dimmer settings; of V2's only the primary
+  side's was observed (``led_drive_v2_primary``), so V2's other sides are assumed to share it (the
+  study set each side with a potentiometer and says nothing of the others);
+* an unknowns search's ``samples.csv`` (:func:`studies.catalog.unknowns_search.calibrated_set`).
+
+Points are taken evenly over the file's order (both files are in Sobol' order, so an even pick
+stays spread over the set).
+
+Example
+-------
+>>> from studies.catalog import prediction_set
+>>> s = prediction_set.load("results/unknowns-search/samples.csv", limit=2)  # doctest: +SKIP
+>>> task = {"scenario": {"beacon": "v2", "side": "red", "camera": "canon-t6-18mm"}, "seed": 0}
+>>> s.apply(task, 0)["scenario"]["led_current_mA"]  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from studies.catalog import calibration, unknowns_search
+from studies.engine.unknowns import Unknown, apply
+
+__all__ = ["CALIBRATION", "SEARCH", "PredictionSet", "load"]
+
+CALIBRATION = "calibration"
+SEARCH = "unknowns-search"
+
+
+@dataclass(frozen=True)
+class PredictionSet:
+    """Points of the unknowns and how to set them on a frame task.
+
+    Attributes
+    ----------
+    points
+        Name → value per point.
+    which
+        What the set is, in words (for reports).
+    source
+        :data:`CALIBRATION` or :data:`SEARCH`.
+    space
+        The unknowns the points set (their registry entries).
+    """
+
+    points: tuple[dict[str, Any], ...]
+    which: str
+    source: str
+    space: dict[str, Unknown]
+
+    def primary_side(self, index: int) -> str | None:
+        """The primary test's side at point ``index`` (None: the set does not say; the test's own)."""
+        return self.points[index].get(calibration.PRIMARY_SIDE.name)
+
+    def apply(self, task: dict, index: int) -> dict:
+        """``task`` with point ``index`` set (its beacon side's own dimmer setting)."""
+        values = self.points[index]
+        if self.source == SEARCH:
+            return unknowns_search.apply_point(task, values)
+        scenario = task["scenario"]
+        beacon, side = scenario["beacon"], scenario["side"]
+        own = {k: v for k, v in values.items() if not k.startswith("led_drive_") and k != calibration.PRIMARY_SIDE.name}
+        drive = unknowns_search.drive_name(beacon, side)
+        own["led_drive"] = values[drive] if drive in values else values[unknowns_search.drive_name(beacon, "primary")]
+        registry = {k: u for k, u in unknowns_search.registry_for(self.space).items() if k in own}
+        return apply(task, own, registry)
+
+
+def load(path: str | Path, limit: int | None = None) -> PredictionSet:
+    """The set in ``path`` (a calibration's ``nroy.csv`` or a search's ``samples.csv``, told apart by its
+    columns), at most ``limit`` points. ``ValueError`` naming the file for anything else, or an empty NROY."""
+    path = Path(path)
+    try:
+        header = list(pd.read_csv(path, nrows=0).columns)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else "empty"
+        raise ValueError(f"{path}: expected a calibration's nroy.csv or a search's samples.csv ({reason})") from None
+    if "consistent" in header:
+        points, which = unknowns_search.calibrated_set(path, limit)
+        return PredictionSet(tuple(points), which, SEARCH, unknowns_search.search_space())
+    space = calibration.search_space(calibration.load_observations())
+    missing = [n for n in space if n not in header]
+    if missing:
+        raise ValueError(
+            f"{path}: expected a calibration's nroy.csv (a column per calibrated unknown) or a search's samples.csv, "
+            f"missing column {missing[0]!r}"
+        )
+    table = pd.read_csv(path)
+    if table.empty:
+        raise ValueError(f"{path}: the calibration's NROY set is empty (it ruled out every point; see its report)")
+    rows = table[list(space)].to_dict("records")
+    n = len(rows)
+    if limit is not None and n > limit:
+        rows = [rows[i] for i in np.linspace(0, n - 1, limit).round().astype(int)]
+    points = tuple({k: _plain(v, space[k]) for k, v in r.items()} for r in rows)
+    which = (
+        f"{len(points)} of the {n} points the calibration did not rule out (NROY, {path.name}); V2's sides other "
+        "than the primary test's share its dimmer setting (not observed)"
+    )
+    return PredictionSet(points, which, CALIBRATION, space)
+
+
+def _plain(v: Any, u: Unknown) -> Any:
+    """A CSV cell as the unknown's value: numbers as float, choices as the choice they spell."""
+    v = v.item() if isinstance(v, np.generic) else v
+    if u.kind == "choice":
+        for c in u.choices:
+            if str(c) == str(v) or (isinstance(c, bool) and str(c).lower() == str(v).lower()):
+                return c
+        raise ValueError(f"{u.name}: {v!r} is not one of its choices ({u.describe_range()})")
+    return float(v) if isinstance(v, int | float) and math.isfinite(float(v)) else v
