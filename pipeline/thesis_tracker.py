@@ -367,14 +367,20 @@ def _numbered(colour, full_uv, intrinsics: Intrinsics, scale: float, blobs) -> T
 
 
 def derive_hsv_ranges(
-    images, colour: str, margin: tuple[int, int, int] = (3, 10, 10), percentiles: tuple[float, float] = (1.0, 99.0)
+    images,
+    colour: str,
+    margin: tuple[int, int, int] = (3, 10, 10),
+    percentiles: tuple[float, float] = (1.0, 99.0),
+    *,
+    regions=None,
 ) -> list[HsvBox]:
     """The study's threshold-setting procedure, made repeatable (docs/source-study.md §10).
 
     From close-range (150 mm) captures of one side lit in ``colour``: take the lit
-    pixels (V above Otsu's threshold of each image's V channel), and span the given
-    percentiles of their H, S and V, widened by ``margin`` (H, S, V), with V's top at 255.
-    A hue range crossing 0/180 (red) is returned as two boxes.
+    pixels (V above Otsu's threshold of each image's V channel), or the pixels a person would
+    draw the box around (``regions``: the markers' cores), and span the given percentiles of
+    their H, S and V, widened by ``margin`` (H, S, V), with V's top at 255. A hue range crossing
+    0/180 (red) is returned as two boxes.
 
     Parameters
     ----------
@@ -386,6 +392,8 @@ def derive_hsv_ranges(
         Widening of the percentile span, HSV units.
     percentiles
         Lower and upper percentiles of the lit pixels' values.
+    regions
+        Optional boolean masks, one per image (its size): the pixels to span instead of Otsu's lit ones.
     """
     if colour not in SIDE_COLOURS:
         raise ValueError(f"colour: expected one of {', '.join(SIDE_COLOURS)}, got {colour!r}")
@@ -395,9 +403,14 @@ def derive_hsv_ranges(
         if bgr is None:
             raise ValueError(f"images[{k}]: {reason}")
         hsv = cv2.cvtColor(to_uint8(bgr), cv2.COLOR_BGR2HSV)
-        val = hsv[..., 2]
-        thr, _ = cv2.threshold(val, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-        lit = val > thr
+        if regions is not None:
+            lit = np.asarray(regions[k], dtype=bool)
+            if lit.shape != hsv.shape[:2]:
+                raise ValueError(f"regions[{k}]: expected a mask of the image's size {hsv.shape[:2]}, got {lit.shape}")
+        else:
+            val = hsv[..., 2]
+            thr, _ = cv2.threshold(val, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+            lit = val > thr
         if lit.sum() < 5:
             raise ValueError(f"images[{k}]: no lit pixels found")
         samples.append(hsv[lit])

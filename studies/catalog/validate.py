@@ -37,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from camera_models.camera import load_camera
+from camera_models.capture import marker_core_saturation, marker_pixels
 from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, derive_hsv_ranges
 from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
@@ -228,16 +229,36 @@ def run(
 
 
 def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
-    """Per colour, HSV boxes from the preliminary captures (the study's procedure)."""
+    """Per colour, HSV boxes from the preliminary captures as a person tuning them would draw them:
+    around the five marker cores of that colour (their true positions and core radii) in every
+    150 mm capture of it (:func:`pipeline.thesis_tracker.derive_hsv_ranges` with those regions)."""
 
     out = {}
     for colour in ("red", "green", "blue", "yellow"):
-        images = [capture_frame(t).image_bgr for t in preliminary_tasks if t["scenario"]["side"] == colour]
+        images, regions = [], []
+        for t in preliminary_tasks:
+            if t["scenario"]["side"] != colour:
+                continue
+            frame = capture_frame(t)
+            images.append(frame.image_bgr)
+            regions.append(_core_region(frame))
         try:
-            out[colour] = [[list(lo), list(hi)] for lo, hi in derive_hsv_ranges(images, colour)]
+            out[colour] = [[list(lo), list(hi)] for lo, hi in derive_hsv_ranges(images, colour, regions=regions)]
         except ValueError:
             out[colour] = []  # no lit pixels: that colour cannot be thresholded
     return out
+
+
+def _core_region(frame) -> np.ndarray:
+    """The saved image's pixels inside the five marker cores (true positions, core radii; at least one pixel)."""
+    h, w = frame.image_bgr.shape[:2]
+    uv = marker_pixels(frame.camera, frame.scenario) - np.array([frame.capture.x0, frame.capture.y0])
+    radii = [max(m["core_radius_px"], 1.0) for m in marker_core_saturation(frame.capture, frame.camera, frame.scenario)]
+    yy, xx = np.mgrid[0:h, 0:w]
+    region = np.zeros((h, w), dtype=bool)
+    for (u, v), r in zip(uv, radii, strict=True):
+        region |= (xx - u) ** 2 + (yy - v) ** 2 <= r * r
+    return region
 
 
 CONDITION_KEYS = [

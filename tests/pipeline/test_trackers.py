@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -274,3 +275,19 @@ def test_cross_candidates_of_many_sets_equal_the_one_by_one_rule():
     expected = [(s, c) for s, pts in enumerate(sets) for c in _cross_candidates_one_by_one(pts)]
     assert len(expected) > 3000
     assert [(int(w), list(map(int, n))) for w, n in zip(which, numbered, strict=True)] == expected
+
+
+def test_derived_boxes_span_the_regions_given_not_the_brightest_pixels():
+    """A person draws the box around the markers' cores: with ``regions`` the box spans those pixels'
+    colour, even where a brighter patch of another colour would win Otsu's lit pixels."""
+    image = np.zeros((60, 80, 3), np.uint8)
+    image[10:20, 10:20] = cv2.cvtColor(np.uint8([[[60, 200, 150]]]), cv2.COLOR_HSV2BGR)[0, 0]  # the marker
+    image[30:50, 40:70] = cv2.cvtColor(np.uint8([[[120, 200, 255]]]), cv2.COLOR_HSV2BGR)[0, 0]  # a brighter glow
+    region = np.zeros(image.shape[:2], bool)
+    region[10:20, 10:20] = True
+    ((lo, hi),) = derive_hsv_ranges([image], "green", margin=(0, 0, 0), regions=[region])
+    assert lo[0] <= 60 <= hi[0] and hi[0] - lo[0] <= 2 and lo[1] >= 195
+    ((lo, hi),) = derive_hsv_ranges([image], "green", margin=(0, 0, 0))
+    assert lo[0] <= 120 <= hi[0]  # Otsu's lit pixels include the glow
+    with pytest.raises(ValueError, match=r"regions\[0\]"):
+        derive_hsv_ranges([image], "green", regions=[region[:10]])
