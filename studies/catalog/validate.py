@@ -411,7 +411,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "The DSLR (18 mm) detected the markers up to 5 m and 30°",
         bool(len(prim)) and prim.detected_fraction.min() >= 0.5,
         f"primary test detected fraction {prim.detected_fraction.min():.2f}-{prim.detected_fraction.max():.2f} "
-        f"(over the set and seeds {prim.detected_low.min():.2f}-{prim.detected_high.max():.2f})"
+        f"(over the set and seeds {prim.detected_low.min():.2f}-{prim.detected_high.max():.2f})" + _why_missed(prim)
         if len(prim)
         else "not tested",
         f"{_failures(frame[frame.test == 'primary'])}; {t6_colour}",
@@ -468,7 +468,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
     verdict(
         "Resolution and blob merging limit the range",
         bool(len(lost)) and lost.merged_or_lost_fraction.mean() >= 0.5,
-        f"merged-or-lost fraction at 7-10 m: {lost.merged_or_lost_fraction.mean():.2f}",
+        f"merged-or-lost fraction at 7-10 m: {lost.merged_or_lost_fraction.mean():.2f}" + _why_missed(lost),
         f"frames at 7-10 m that fail do so otherwise: {_failures(frame[(frame.test == 'range') & far_frames])}",
         "veiling glare (glare_on) and the LED drive: brighter halos merge neighbouring markers",
     )
@@ -500,6 +500,19 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "the centroid noise of markers 2-3 against 4-5 (the LED drive of each side)",
     )
     return out
+
+
+def _why_missed(rows) -> str:
+    """ "; of all frames, x % had extra blobs, y % merged markers, z % lost ones" (the mean over the rows'
+    conditions; empty when the rows carry no such measures)."""
+    cols = ("extra_blobs_fraction", "merged_fraction", "lost_fraction")
+    if not len(rows) or any(c not in rows or rows[c].isna().all() for c in cols):
+        return ""
+    extra, merged, lost = (float(rows[c].mean()) for c in cols)
+    return (
+        f"; of all frames {extra:.0%} missed with extra blobs, {merged:.0%} with merged markers, "
+        f"{lost:.0%} with lost ones"
+    )
 
 
 def _failures(frame) -> str:
