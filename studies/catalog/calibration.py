@@ -44,6 +44,7 @@ from studies.engine.calibration import (
     Settings,
     from_json,
     history_match,
+    observation_shares,
     to_json,
     write_figures,
 )
@@ -542,6 +543,8 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
     rep.table(input_table(result), formats={"share kept": "{:.2f}"})
     rep.heading("Observations and the discrepancy each needs")
     need = {d.observation: d for d in result.discrepancy}
+    alone, without = observation_shares(result)
+    shares = {o.name: (a, w) for o, a, w in zip(result.observations, alone, without, strict=True)}
     rep.table(
         pd.DataFrame(
             [
@@ -556,12 +559,16 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
                     "rules out all alone": bool(need[o.observation.name].rules_out_alone)
                     if o.observation.name in need
                     else False,
+                    "share it rules out (wave 1)": shares[o.observation.name][0],
+                    "share left without it (wave 1)": shares[o.observation.name][1],
                 }
                 for o in observed
             ]
         ),
         caption="needed: the smallest discrepancy sd under which some point (alone) or the best point overall "
-        "(jointly) is not ruled out by that observation, from the last wave's emulators",
+        "(jointly) is not ruled out by that observation, from the last wave's emulators; shares of the whole "
+        "space under the first wave's emulators: what the observation rules out by itself, and what the "
+        "others leave",
     )
     if result.waves:
         last = result.waves[-1]

@@ -32,6 +32,7 @@ from studies.engine.calibration import (
     history_match,
     implausibility,
     nroy_mask,
+    observation_shares,
     required_discrepancy_var,
     to_json,
     write_figures,
@@ -272,6 +273,22 @@ def test_inputs_map_like_the_unknowns_registry():
     for inp in from_registry.inputs:
         u = registry[inp.name]
         assert inp.log == (u.kind == "loguniform") and inp.categorical == (u.kind == "choice")
+
+
+def test_each_observations_share_of_the_space_is_known():
+    """y1 = x1 observed 'at most 0.3' rules out ~70 % alone; y2 = x2 + 1 observed at 10 (impossible) rules
+    out everything alone, and without it the space left is y1's 30 %."""
+    space = InputSpace((Input("x1", 0.0, 1.0), Input("x2", 0.0, 1.0)))
+    obs = [Observation("y1", 0.3, 0.0, 0.01**2, kind="at_most"), Observation("y2", 10.0, 0.0, 0.01**2)]
+    result = history_match(
+        lambda values: np.array([[v["x1"], v["x2"] + 1.0] for v in values]),
+        space,
+        obs,
+        settings=Settings(n_per_wave=16, min_waves=1, max_waves=1, n_reference=2048, n_restarts=1),
+    )
+    alone, without = observation_shares(result)
+    assert alone[0] == pytest.approx(0.7 - 3 * 0.01, abs=0.03) and alone[1] == 1.0
+    assert without[1] == pytest.approx(0.3 + 3 * 0.01, abs=0.03) and without[0] == 0.0
 
 
 def test_the_constraining_input_is_ranked_first():

@@ -21,6 +21,7 @@ from studies.engine.calibration.waves import (
     from_json,
     history_match,
     nroy_mask,
+    observation_shares,
     reference_implausibility,
     to_json,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "implausibility",
     "loo",
     "nroy_mask",
+    "observation_shares",
     "predict",
     "reference_implausibility",
     "required_discrepancy_var",

@@ -54,6 +54,7 @@ __all__ = [
     "from_json",
     "history_match",
     "nroy_mask",
+    "observation_shares",
     "reference_implausibility",
     "to_json",
     "wave_implausibility",
@@ -263,6 +264,33 @@ def nroy_mask(result: HistoryMatch, q: np.ndarray) -> np.ndarray:
     """(n,) True where unit points ``q`` are not ruled out by any of the result's waves."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     return _inside(result.waves, result.space, result.observations, result.settings, q)
+
+
+def observation_shares(result: HistoryMatch) -> tuple[np.ndarray, np.ndarray]:
+    """What each observation does to the whole space under the first wave's emulators (the only ones
+    trained over all of it), on the reference sample.
+
+    Returns
+    -------
+    alone
+        (m,) share of the space observation j rules out by itself (its implausibility above the cut-off).
+    without
+        (m,) share not ruled out by the other observations (combined as the match combines them, at most
+        the order their number allows): how much room there would be without observation j.
+    """
+    m = len(result.observations)
+    if not result.waves:
+        return np.zeros(m), np.ones(m)
+    q = reference_points(result.space, result.settings)
+    per = wave_implausibility(result.waves[0], result.space, result.observations, result.settings, q)
+    alone = (per > result.settings.cutoff).mean(axis=0)
+    without = np.ones(m)
+    for j in range(m):
+        rest = np.delete(per, j, axis=1)
+        if rest.shape[1]:
+            order = min(result.settings.order, rest.shape[1])
+            without[j] = float((combine(rest, order=order) <= result.settings.cutoff).mean())
+    return alone, without
 
 
 def reference_implausibility(result: HistoryMatch) -> tuple[np.ndarray, np.ndarray]:
