@@ -71,6 +71,9 @@ NAME = "calibrate-unknowns"
 OBSERVATIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "observations.toml"
 RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
 """Render settings of the calibration's frames (close range: the target alone is in view)."""
+QUICK_RENDER = {**RENDER, "near_field_spp": 256}
+"""The quick form's: near fields at a quarter of the samples (their centre bins then carry tens of per
+cent of noise at this machine's 1 024-sample reference), about four times cheaper per point."""
 
 CONDITIONS: dict[str, dict] = {
     "webcam-150mm": {
@@ -287,7 +290,13 @@ def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
     return out
 
 
-def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str, Unknown], seeds: int) -> list[dict]:
+def tasks(
+    points: Sequence[dict],
+    observed: Sequence[Observed],
+    space: dict[str, Unknown],
+    seeds: int,
+    render: dict | None = None,
+) -> list[dict]:
     """Frame tasks of every point × observed frame × seed (the study's tracker and estimator only), tagged
     with the point and the frame's table name (the outputs observed on one frame share its frames)."""
     registry = unknowns_search.registry_for(space) if any(k.startswith("led_drive_") for k in space) else space
@@ -314,7 +323,7 @@ def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str,
             for seed in range(seeds):
                 task = {
                     "scenario": dict(scenario),
-                    "render": dict(RENDER),
+                    "render": dict(RENDER if render is None else render),
                     "seed": seed,
                     "trackers": ["thesis"],
                     "estimators": ["thesis"],
@@ -328,13 +337,22 @@ def tasks(points: Sequence[dict], observed: Sequence[Observed], space: dict[str,
     return out
 
 
-def simulator(out: Path, observed: Sequence[Observed], space: dict[str, Unknown], seeds: int, execution: Execution):
+def simulator(
+    out: Path,
+    observed: Sequence[Observed],
+    space: dict[str, Unknown],
+    seeds: int,
+    execution: Execution,
+    render: dict | None = None,
+):
     """``simulate(values) -> (n, m) outputs`` for :func:`studies.engine.calibration.history_match`: the
     points' frames run (and stored in ``out``, so a repeated point is not simulated twice), each
     observation's output the mean over its seeds (NaN where no frame of it ran)."""
 
     def simulate(points: list[dict[str, Any]]) -> np.ndarray:
-        rows = run_frames(tasks(points, observed, space, seeds), out, execution, description="calibration frames")
+        rows = run_frames(
+            tasks(points, observed, space, seeds, render), out, execution, description="calibration frames"
+        )
         frame = pd.DataFrame(rows)
         result = np.full((len(points), len(observed)), np.nan)
         for (index, name), g in frame.groupby(["point", "observed"]):
@@ -354,6 +372,7 @@ def run(
     seeds: int = 2,
     observations: str | Path = OBSERVATIONS_FILE,
     execution: Execution = Execution(),
+    render: dict | None = None,
 ) -> HistoryMatch:
     """History-match the unknowns to the observations; write the record, NROY set, summary and figures.
 
@@ -375,7 +394,7 @@ def run(
         atomic_write_bytes(record, to_json(result).encode())
 
     result = history_match(
-        simulator(out, observed, unknowns, seeds, execution),
+        simulator(out, observed, unknowns, seeds, execution, render),
         space,
         [o.observation for o in observed],
         settings=settings,

@@ -434,7 +434,10 @@ def calibrate_unknowns(
         ),
     ] = None,
     waves: Annotated[int, typer.Option("--waves", help="Waves at most (at least 3 unless nothing is left), 3-20.")] = 5,
-    seeds: Annotated[int, typer.Option("--seeds", help="Noise seeds per point and observation.")] = 2,
+    seeds: Annotated[
+        int | None,
+        typer.Option("--seeds", help="Noise seeds per point and observation.", show_default="2; 1 with --quick"),
+    ] = None,
     order: Annotated[
         int,
         typer.Option(
@@ -450,7 +453,12 @@ def calibrate_unknowns(
         ),
     ] = None,
     quick: Annotated[
-        bool, typer.Option("--quick", help="8 runs per wave, 3 waves, a small reference sample (a first look).")
+        bool,
+        typer.Option(
+            "--quick",
+            help="8 runs per wave, 3 waves, one seed, near fields at 256 samples, a small reference sample "
+            "(a first look, about 4x cheaper per point; not a calibration to predict from).",
+        ),
     ] = False,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
@@ -463,6 +471,7 @@ def calibrate_unknowns(
     from studies.engine.calibration import Settings
 
     runs = runs_per_wave if runs_per_wave is not None else (8 if quick else 40)
+    seeds = seeds if seeds is not None else (1 if quick else 2)
     if not 3 <= runs <= 4096:
         raise UsageError(f"runs-per-wave: expected an integer in [3, 4096], got {runs}")
     if not 3 <= waves <= 20:
@@ -485,12 +494,19 @@ def calibrate_unknowns(
     check_render_cache()
     prepare_out_dir(out)
     t0 = time.perf_counter()
-    result = calibration.run(out, settings=settings, seeds=seeds, observations=path, execution=run_on)
+    result = calibration.run(
+        out,
+        settings=settings,
+        seeds=seeds,
+        observations=path,
+        execution=run_on,
+        render=calibration.QUICK_RENDER if quick else None,
+    )
     fractions = ", ".join(f"{w.nroy_fraction:.3g}" for w in result.waves)
     console.print(
         f"{len(result.waves)} waves ({result.stopped}); NROY fraction after each: {fractions}; "
         f"{len(result.nroy_points)} reference points not ruled out ({time.perf_counter() - t0:.0f} s); "
-        f"wrote {out}/history.json, nroy.csv, summary.json"
+        f"wrote {out}/report.html, history.json, nroy.csv, summary.json"
     )
 
 

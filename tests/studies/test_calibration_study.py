@@ -105,7 +105,7 @@ def test_a_history_match_is_written_resumed_and_recovers_a_planted_answer(tmp_pa
     ]
     calls = []
 
-    def planted(out, observed, unknowns, seeds, execution):
+    def planted(out, observed, unknowns, seeds, execution, render=None):
         def simulate(points):
             calls.append(len(points))
             return np.array([[2.0 * (p["lit_face_diameter"] - 10.0)] * len(observed) for p in points])
@@ -132,3 +132,14 @@ def test_a_history_match_is_written_resumed_and_recovers_a_planted_answer(tmp_pa
     before = len(calls)
     again = calibration.run(out, settings=settings, seeds=1, observations=observations)
     assert len(calls) == before and len(again.waves) == 3  # resumed: every wave was on record
+
+
+def test_the_quick_form_renders_its_near_fields_with_fewer_samples():
+    observed = calibration.load_observations()
+    unknowns = calibration.search_space(observed)
+    space = InputSpace.from_unknowns(unknowns)
+    point = space.values(np.full((1, space.dim), 0.5))
+    full = calibration.tasks(point, observed, unknowns, seeds=1)
+    quick = calibration.tasks(point, observed, unknowns, seeds=1, render=calibration.QUICK_RENDER)
+    assert {t["render"]["near_field_spp"] for t in full} == {1024}
+    assert {t["render"]["near_field_spp"] for t in quick} == {256}
