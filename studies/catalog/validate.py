@@ -293,7 +293,6 @@ def validation_table(frame):
                 "yaw_deg": rec["nominal_yaw_deg"],
                 "detected_fraction": float(np.mean(detected)),
                 "merged_or_lost_fraction": float(np.mean(merged)),
-                **failures,
                 "colour_correct_fraction": float(np.mean(colour_ok)) if colour_ok else 0.0,
                 "range_est_m": float(np.nanmean(g.range_est_m)) if g.range_est_m.notna().any() else np.nan,
                 "yaw_est_deg": float(np.nanmean(g.yaw_est_deg)) if g.yaw_est_deg.notna().any() else np.nan,
@@ -302,6 +301,7 @@ def validation_table(frame):
                 "weights": rec["weights"],
                 "rectification": rec["rectification"],
                 **_intervals(detected, g),
+                **failures,
             }
         )
     return _over_points(pd.DataFrame(per_point))

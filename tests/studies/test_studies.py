@@ -102,15 +102,21 @@ def test_validate_tiny(tmp_path, monkeypatch):
     ]
     assert list(table.columns[12:]) == [
         "core_saturation", "thresholds", "weights", "rectification", "detected_low", "detected_high",
-        "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high", "points",
+        "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high", "extra_blobs_fraction",
+        "merged_fraction", "lost_fraction", "points",
     ]  # fmt: skip
+    for cause in ("extra_blobs_fraction", "merged_fraction", "lost_fraction"):  # causes of missed frames only
+        assert (table[cause] <= 1 - table.detected_fraction + 1e-9).all()
     assert (table.points == 1).all()  # no calibration: the unknowns at nominal, one point
     assert (table.detected_low <= table.detected_fraction).all() and (
         table.detected_fraction <= table.detected_high
     ).all()
     # the preliminary test once; the later tests with the study's and the derived thresholds; the weight
-    # experiment as 2 weight sets × 3 rectifications
+    # experiment (its first condition: 18 mm, 0°) as 2 weight sets × 3 rectifications
     assert len(rows) == len(table) == 1 + 2 * 2 + 2 * 6
+    assert {(c["camera"], c["yaw_deg"]) for t, c in pairs if t == "weights"} == {
+        (cam, y) for cam in ("canon-t6-18mm", "canon-t6-10mm") for y in (0.0, 30.0)
+    }  # over yaw with both lenses (0° and 30° in the quick form)
     weights = table[table.test == "weights"]
     assert set(zip(weights.weights, weights.rectification, strict=True)) == {
         (w, r) for w in ("tuned", "equal") for r in ("none", "alpha 0", "alpha 1")
