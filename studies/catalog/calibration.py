@@ -72,8 +72,11 @@ OBSERVATIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "observations
 RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
 """Render settings of the calibration's frames (close range: the target alone is in view)."""
 QUICK_RENDER = {**RENDER, "near_field_spp": 256}
-"""The quick form's: near fields at a quarter of the samples (their centre bins then carry tens of per
-cent of noise at this machine's 1 024-sample reference), about four times cheaper per point."""
+"""The quick form's: near fields at a quarter of the samples. Measured on V1's red marker (foam + one
+sheet): the radial profile's centre bin (1/144 of the face's area) scatters ±16 % over seeds at 256
+samples and ±11 % at 1 024; the outer bins ±5 %. A near field is 16 s of one core at 1 024 samples
+(4 s at 256), about a quarter of a calibration point's cost beside its 12 beacon renders and 24
+captures."""
 
 CONDITIONS: dict[str, dict] = {
     "webcam-150mm": {

@@ -457,7 +457,7 @@ def calibrate_unknowns(
         typer.Option(
             "--quick",
             help="8 runs per wave, 3 waves, one seed, near fields at 256 samples, a small reference sample "
-            "(a first look, about 4x cheaper per point; not a calibration to predict from).",
+            "(a first look; not a calibration to predict from).",
         ),
     ] = False,
     seed: opt.Seed = 0,
