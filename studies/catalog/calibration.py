@@ -416,6 +416,7 @@ def run(
 def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
     """What the match found, in plain data: waves with their NROY fraction, why it stopped, and per
     observation its condition and the discrepancy it needed."""
+    alone, without = observation_shares(result)
     return {
         "study": NAME,
         "stopped": result.stopped,
@@ -437,8 +438,10 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
                 "alone_sd": d.alone_sd,
                 "joint_sd": d.joint_sd,
                 "rules_out_alone": d.rules_out_alone,
+                "share_ruled_out_alone_wave1": float(a),
+                "share_left_without_it_wave1": float(w),
             }
-            for d in result.discrepancy
+            for d, a, w in zip(result.discrepancy, alone, without, strict=True)
         ],
         "observations": [
             {
