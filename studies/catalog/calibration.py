@@ -441,7 +441,7 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
                 "share_ruled_out_alone_wave1": float(a),
                 "share_left_without_it_wave1": float(w),
             }
-            for d, a, w in zip(result.discrepancy, alone, without, strict=True)
+            for d, a, w in zip(result.discrepancy, alone, without, strict=False)  # no waves: no discrepancy
         ],
         "observations": [
             {
