@@ -65,6 +65,8 @@ __all__ = [
     "search_space",
     "simulator",
     "tasks",
+    "write_outputs",
+    "write_report",
 ]
 
 NAME = "calibrate-unknowns"
@@ -405,12 +407,20 @@ def run(
         on_wave=save,
     )
     save(result)
-    nroy = pd.DataFrame(space.values(result.nroy_points)) if len(result.nroy_points) else pd.DataFrame()
+    write_outputs(result, observed, out)
+    return result
+
+
+def write_outputs(result: HistoryMatch, observed: Sequence[Observed], out: Path) -> None:
+    """``nroy.csv``, the figures, ``summary.json`` and ``report.html`` of a match (also of one read back
+    from its ``history.json`` while it is still running: they then say "running")."""
+    out = Path(out)
+    values = result.space.values(result.nroy_points) if len(result.nroy_points) else []
+    nroy = pd.DataFrame(values) if values else pd.DataFrame(columns=list(result.space.names))
     atomic_write_bytes(out / "nroy.csv", nroy.to_csv(index=False, float_format="%.6g").encode())
     write_figures(result, out)
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed), indent=2).encode())
     write_report(result, observed, out)
-    return result
 
 
 def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
@@ -506,13 +516,20 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
     out = Path(out)
     frames = len({o.frame for o in observed})
     runs = sum(len(w.design) for w in result.waves)
+    plural = "" if len(result.waves) == 1 else "s"
     rep = Report("Calibration by history matching: the unknowns against what the study saw at close range")
     lead = [
         f"{len(result.observations)} observed outputs on {frames} close-range frames (docs/source-study.md §10: the "
         f"150 mm threshold tuning and the primary test's 1 m frames), {result.space.dim} unknowns; "
-        f"{len(result.waves)} waves of {result.settings.n_per_wave} points ({runs} points simulated); a point is "
-        f"ruled out when the {_ordinal(result.settings.order)} implausibility over the outputs exceeds "
-        f"{result.settings.cutoff:g}. Stopped: {result.stopped}.",
+        f"{len(result.waves)} wave{plural} of {result.settings.n_per_wave} points ({runs} points simulated); a point "
+        f"is ruled out when the {_ordinal(result.settings.order)} implausibility over the outputs exceeds "
+        f"{result.settings.cutoff:g}. "
+        + (
+            f"Still running: {len(result.waves)} of at most {result.settings.max_waves} waves written; what follows "
+            "is the state after the last of them."
+            if result.stopped == "running"
+            else f"Stopped: {result.stopped}."
+        ),
     ]
     if len(result.nroy_points):
         table = input_table(result)

@@ -199,7 +199,7 @@ def loo_figure(result: HistoryMatch):
             e = np.asarray(w.loo[j].standardised_errors)
             ax.plot(np.full(len(e), w.index) + np.linspace(-0.25, 0.25, len(e)), e, ".", ms=3)
         ax.set_xticks([w.index for w in result.waves])
-        ax.set_title(o.name, fontsize=7)
+        ax.set_title(o.name.replace(".", "\n"), fontsize=7)  # frame, then output
         ax.tick_params(labelsize=6)
     fig.supxlabel("wave", fontsize=8)
     fig.supylabel("LOO standardised error (grey: ±2)", fontsize=8)
@@ -256,7 +256,9 @@ def outputs_figure(result: HistoryMatch):
         ax.set_ylim(y0 - pad, y1 + pad)
         ax.set_xticks([w.index for w in result.waves])
         ax.tick_params(labelsize=6)
-        ax.set_title(f"{o.name}\n{o.kind} {o.z:g}{(' ' + o.unit) if o.unit else ''}", fontsize=6)
+        unit = f" {o.unit}" if o.unit else ""
+        frame_and_output = o.name.replace(".", "\n")
+        ax.set_title(f"{frame_and_output}\n{o.kind} {o.z:g}{unit}", fontsize=6)
     fig.supxlabel("wave", fontsize=8)
     fig.tight_layout()
     return fig
