@@ -471,6 +471,8 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
     }
 
 
+RUNS_PER_INPUT = 10
+"""Runs per input below which the report warns that the emulators are thin (Loeppky, Sacks & Welch 2009)."""
 PINNED = 0.8
 """An unknown counts as narrowed when the NROY set keeps less than this share of its range (5-95 % span;
 for a categorical one, of its choices)."""
@@ -531,6 +533,13 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
             else f"Stopped: {result.stopped}."
         ),
     ]
+    if runs < RUNS_PER_INPUT * result.space.dim:
+        lead.append(
+            f"Caution: {runs} runs for {result.space.dim} inputs, fewer than the {RUNS_PER_INPUT} per input a "
+            'Gaussian-process emulator is usually given (Loeppky, Sacks & Welch 2009, "Choosing the sample size '
+            'of a computer experiment"): what the emulators rule out between the runs is their guess; the '
+            "simulated outputs below are the evidence."
+        )
     if len(result.nroy_points):
         table = input_table(result)
         pinned = table[table["share kept"] < PINNED]
