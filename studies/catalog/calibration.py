@@ -473,6 +473,8 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
 
 RUNS_PER_INPUT = 10
 """Runs per input below which the report warns that the emulators are thin (Loeppky, Sacks & Welch 2009)."""
+DESCRIBED = 20
+"""Fewest NROY reference points the report describes by their ranges (fewer: it says how many, no ranges)."""
 PINNED = 0.8
 """An unknown counts as narrowed when the NROY set keeps less than this share of its range (5-95 % span;
 for a categorical one, of its choices)."""
@@ -540,7 +542,13 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
             'of a computer experiment"): what the emulators rule out between the runs is their guess; the '
             "simulated outputs below are the evidence."
         )
-    if len(result.nroy_points):
+    if 0 < len(result.nroy_points) < DESCRIBED:
+        lead.append(
+            f"Not ruled out (NROY): {result.nroy_fraction:.3g} of the space, only {len(result.nroy_points)} of "
+            f"{result.settings.n_reference} reference points: too few to describe by ranges (they are in nroy.csv). "
+            "The discrepancy table says which observations leave so little."
+        )
+    elif len(result.nroy_points):
         table = input_table(result)
         pinned = table[table["share kept"] < PINNED]
         lead.append(
