@@ -117,6 +117,7 @@ def marker_mask_measures(
     *,
     settings: ThesisTrackerSettings | None = None,
     crop_origin_px: tuple[int, int] = (0, 0),
+    processed: tuple[NDArray[np.uint8], float] | None = None,
 ) -> MaskMeasures:
     """Measure one colour's mask at the true markers (the module docstring says what and why).
 
@@ -134,10 +135,14 @@ def marker_mask_measures(
         Whose boxes (``settings``' ranges; the study's by default).
     settings, crop_origin_px
         As :func:`pipeline.thesis_tracker.thesis_track`.
+    processed
+        The tracker's processed image and its scale (:func:`pipeline.thesis_tracker.processed_hsv` of
+        ``image_bgr`` with these settings), when the caller has it already: several threshold variants
+        of one frame share it.
     """
     s = settings or ThesisTrackerSettings()
     boxes = s.ranges().get(colour, [])
-    hsv, scale = processed_hsv(image_bgr, intrinsics, s)
+    hsv, scale = processed if processed is not None else processed_hsv(image_bgr, intrinsics, s)
     h, w = hsv.shape[:2]
     uv = np.asarray(markers_uv, dtype=np.float64).reshape(-1, 2) - np.asarray(crop_origin_px, dtype=np.float64)
     ur, vr = resized_pixel(uv[:, 0], uv[:, 1], scale)

@@ -208,11 +208,7 @@ def _frame(name: str, t: Any, at: str) -> list[Observed]:
             fields["drive"] == "dimmed" or _number(fields["drive"], positive=True),
             '"dimmed" or a current > 0 mA',
         ),
-        (
-            "yaw_deg",
-            _number(fields.get("yaw_deg", 0.0)) and abs(fields.get("yaw_deg", 0.0)) <= 90,
-            "an angle in [-90, 90]",
-        ),
+        ("yaw_deg", _number(yaw) and abs(yaw) <= 90, "an angle in [-90, 90]"),
     )
     for key, ok, expected in checks:
         if not ok:

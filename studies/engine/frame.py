@@ -37,7 +37,7 @@ from pipeline.detect import ESTIMATORS, TRACKERS
 from pipeline.evaluate import evaluate_detection
 from pipeline.mask_measures import marker_mask_measures
 from pipeline.thesis_pose import QUEST_WEIGHTS
-from pipeline.thesis_tracker import ThesisTrackerSettings
+from pipeline.thesis_tracker import ThesisTrackerSettings, processed_hsv
 from scenes.background import render_background
 from scenes.radiance import SpectralRadiance
 from scenes.render import render, with_emission
@@ -197,9 +197,10 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     detect_options = _detect_options(task, camera)
     rows = []
     radii = [m["core_radius_px"] for m in saturation]
+    processed: dict = {}  # the study's tracker's processed image, per resize: its threshold variants share it
     for tracker, label, settings in _detectors(task):
         tracked: dict = {}  # the tracker runs once; each estimator reuses its result
-        near = _mask_measures(tracker, image_bgr, intrinsics, truth_uv, radii, scenario.side, settings, cap)
+        near = _mask_measures(tracker, image_bgr, intrinsics, truth_uv, radii, scenario.side, settings, cap, processed)
         for estimator in tuple(ESTIMATORS) if task.estimators is None else task.estimators:
             ev = evaluate_detection(
                 image_bgr,
@@ -239,12 +240,25 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     return [{**row, "frame_s": seconds} for row in rows]
 
 
-def _mask_measures(tracker: str, image_bgr, intrinsics, uv, radii, side: str, settings, cap) -> dict:
+def _mask_measures(tracker: str, image_bgr, intrinsics, uv, radii, side: str, settings, cap, processed: dict) -> dict:
     """The study's tracker's near-miss measures of the side's colour at the true markers
-    (:mod:`pipeline.mask_measures`); empty for another tracker."""
+    (:mod:`pipeline.mask_measures`); empty for another tracker. ``processed`` memoises the processed
+    image per resize setting."""
     if tracker != "thesis":
         return {}
-    m = marker_mask_measures(image_bgr, intrinsics, uv, radii, side, settings=settings, crop_origin_px=(cap.x0, cap.y0))
+    s = settings or ThesisTrackerSettings()
+    if s.resize not in processed:
+        processed[s.resize] = processed_hsv(image_bgr, intrinsics, s)
+    m = marker_mask_measures(
+        image_bgr,
+        intrinsics,
+        uv,
+        radii,
+        side,
+        settings=s,
+        crop_origin_px=(cap.x0, cap.y0),
+        processed=processed[s.resize],
+    )
     return {
         "side_box_distance": m.box_distance,
         "side_in_box_fraction": m.in_box_fraction,

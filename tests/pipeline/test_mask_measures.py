@@ -84,3 +84,12 @@ def test_markers_closer_than_the_close_reach_merge_and_small_ones_are_lost():
     small = _discs((480, 640), UV, 9, (77, 100, 220))
     m = marker_mask_measures(small, WEBCAM, UV, [3.0] * 5, "green")
     assert m.merged_markers == 0 and m.lost_markers == 5
+
+
+def test_a_shared_processed_image_gives_the_same_measures():
+    from pipeline.thesis_tracker import processed_hsv
+
+    image = _discs((480, 640), UV, 17, (77, 100, 220))
+    own = marker_mask_measures(image, WEBCAM, UV, [3.0] * 5, "green")
+    shared = processed_hsv(image, WEBCAM, ThesisTrackerSettings())
+    assert marker_mask_measures(image, WEBCAM, UV, [3.0] * 5, "green", processed=shared) == own
