@@ -598,7 +598,8 @@ def _report(out: Path, table, verdicts: list[dict], derived: dict, flux: pd.Data
     )
     rep.text(
         "Colour thresholds: 'study' = the study's printed HSV ranges; 'derived' = the study's procedure "
-        "(percentiles of the lit pixels of the 150 mm preliminary captures) applied to the simulated captures: "
+        "(percentiles of the five marker cores' pixels in the 150 mm preliminary captures, as a person "
+        "drawing the box around them would take) applied to the simulated captures: "
         + "; ".join(f"{c}: {b}" for c, b in derived.items())
     )
     rep.heading("The study's conclusions")
