@@ -260,7 +260,8 @@ def _number(x: Any, positive: bool = False) -> bool:
 
 
 def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
-    """The unknowns of the observed conditions' cameras, one dimmer setting per beacon side that an
+    """The unknowns of the observed conditions' cameras that act at their ranges (not the study's
+    later sessions' tracker settings), one dimmer setting per beacon side that an
     observation leaves dimmed (``led_drive_v2_primary`` for the primary test's side), which webcam
     tuned the thresholds (when a webcam frame is observed) and the primary test's side (when one of
     its frames is)."""
@@ -269,7 +270,14 @@ def search_space(observed: Sequence[Observed]) -> dict[str, Unknown]:
     webcam = bool(cameras & set(unknowns_search.WEBCAMS))
     cameras |= set(unknowns_search.WEBCAMS) if webcam else set()
     if "canon-t6-10mm" in cameras:  # the search of unknowns-search had no 10 mm condition
-        space.update({n: u for n, u in unknowns_search.load_unknowns().items() if "canon-t6-10mm" in u.cameras})
+        reach = max(c["scenario"]["range_m"] for c in CONDITIONS.values())
+        space.update(
+            {
+                n: u
+                for n, u in unknowns_search.load_unknowns().items()
+                if "canon-t6-10mm" in u.cameras and u.applies_at(reach)
+            }
+        )
     drive = next(u for n, u in space.items() if n.startswith("led_drive_"))
     drives = {
         unknowns_search.drive_name(CONDITIONS[o.condition]["scenario"]["beacon"], o.side)

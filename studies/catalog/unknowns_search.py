@@ -88,11 +88,12 @@ def drive_name(beacon: str, side: str) -> str:
 
 
 def search_space(unknowns: dict[str, Unknown] | None = None) -> dict[str, Unknown]:
-    """The unknowns of the conditions' cameras, with one drive per beacon and side,
+    """The unknowns of the conditions' cameras and ranges, with one drive per beacon and side,
     :data:`TUNING_WEBCAM`, and :data:`HELD` fixed."""
     unknowns = load_unknowns() if unknowns is None else unknowns
     cameras = {c["scenario"]["camera"] for c in CONDITIONS.values()} | set(WEBCAMS)
-    space = {n: u for n, u in unknowns.items() if not u.cameras or cameras & set(u.cameras)}
+    reach = max(c["scenario"]["range_m"] for c in CONDITIONS.values())
+    space = {n: u for n, u in unknowns.items() if (not u.cameras or cameras & set(u.cameras)) and u.applies_at(reach)}
     drive = space.pop("led_drive")
     for c in CONDITIONS.values():
         for side in SIDE_COLOURS:

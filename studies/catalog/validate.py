@@ -21,7 +21,9 @@ setting, paper colour, webcam, lens focus, glare, ISP, …) comes from a set of 
 (``calibration``, :mod:`studies.catalog.prediction_set`): a history match's NROY set (the primary
 test's side is then the point's) or an unknowns search's calibrated set; every test runs at each
 of its points. Without one, the unknowns stay nominal (matched paper, the datasheet current).
-Red side unless the test says each colour (or the point gives the primary test's side).
+Red side unless the test says each colour (or the point gives the primary test's side). The
+study's tracker runs with its printed settings except where the study says a session changed them
+(:func:`session_settings`).
 ``validation.csv`` has one row per tested condition (means over seeds and points;
 ``detected_low``/``high`` span the Wilson 95 % intervals of every point, i.e. an interval over the
 set and the seeds; ``points`` counts them; ``extra_blobs``/``merged``/``lost_fraction`` say why
@@ -52,6 +54,7 @@ from studies.engine.report import Report
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks
+from studies.engine.unknowns import apply, load_unknowns
 
 NAME = "validate"
 AS_BUILT = {"foam": True, "paper_sheets": 1, "paper_colour": "matched", "led_current_mA": 20.0}
@@ -125,6 +128,20 @@ PRIMARY_TESTS = ("primary", "weights")
 """Tests on the primary test's set-up, whose side the study does not state (a calibration's point says)."""
 
 
+def session_settings(task: dict, point: int | None) -> dict:
+    """``task`` with the study's own per-session tracker settings where it says it changed them
+    (the registry's ``tracker`` unknowns, e.g. the 10 mm lens's erosion turned down from 4 m and
+    its close off at 5 m, docs/source-study.md §5.3). No calibration observes them (they act
+    beyond its 1 m), so a setting the study did not quantify is spread over its choices by point
+    (point ``i`` takes choice ``i`` mod their number; the nominal one without points)."""
+    registry = {n: u for n, u in load_unknowns().items() if u.namespace == "tracker"}
+    values = {
+        n: u.choices[point % len(u.choices)] if u.kind == "choice" and point is not None else u.nominal
+        for n, u in registry.items()
+    }
+    return apply(task, values, registry)
+
+
 def default_points(calibration: Path) -> int:
     """Points a prediction runs at by default: 20 of a calibration's NROY set (the spread of what
     survives), 2 of an unknowns search's set."""
@@ -186,6 +203,7 @@ def run(
                         t = {**t, "scenario": {**t["scenario"], "side": chosen.primary_side(point)}}
                         side_of_test = "primary"  # the point's: the study does not say which side
                     t = chosen.apply(t, point)
+                t = session_settings(t, point)
                 if variants:
                     t["thesis_hsv_variants"] = variants
                 settings = WEIGHT_VARIANTS if test == "weights" else (("tuned", None),)
@@ -220,7 +238,9 @@ def run(
     ]
     which += (
         f"; {options.seeds * len(calibrated)} frames per condition ({len(calibrated)} points × {options.seeds} seeds): "
-        "each verdict rests on that many frames per condition, read it with the interval in its evidence"
+        "each verdict rests on that many frames per condition, read it with the interval in its evidence; "
+        "the study's tracker as printed except where the study says a session changed it (10 mm lens: "
+        "erosion turned down from 4 m, 1-3 iterations spread over the points, close off at 5 m)"
     )
     _report(out, table, verdicts, derived, flux, which)
     summary = {"study": NAME, "calibrated_set": which, "conclusions": verdicts, "derived_thresholds": derived}

@@ -303,6 +303,8 @@ def _detectors(task: FrameTask):
                     c: [tuple(tuple(int(x) for x in corner) for corner in box) for box in b] for c, b in boxes.items()
                 }
                 settings = ThesisTrackerSettings(hsv_ranges=ranges)
+            if task.thesis_morphology:
+                settings = replace(settings or ThesisTrackerSettings(), **task.thesis_morphology)
             yield tracker, label, settings
 
 

@@ -25,7 +25,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["FrameTask"]
+__all__ = ["MORPHOLOGY_FIELDS", "FrameTask"]
+
+MORPHOLOGY_FIELDS = ("close_iterations", "erode_iterations")
+"""Settings of the study's tracker a task may replace (:class:`pipeline.thesis_tracker.ThesisTrackerSettings`)."""
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,9 @@ class FrameTask:
     camera_overrides
         Camera-model fields to replace, ``{"lens.f_number": 5.6}``
         (:func:`camera_models.camera.with_overrides`).
+    thesis_morphology
+        Morphology iterations of the study's tracker to replace, ``{"erode_iterations": 2}``
+        (:data:`MORPHOLOGY_FIELDS`): the sessions in which the study says it changed them.
     """
 
     scenario: dict
@@ -85,16 +91,23 @@ class FrameTask:
     rectification: dict | None = None
     align_px: int | None = None
     camera_overrides: dict | None = None
+    thesis_morphology: dict | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.scenario, Mapping):
             raise ValueError(f"task.scenario: expected a table of Scenario fields, got {self.scenario!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"task.seed: expected an integer >= 0, got {self.seed!r}")
-        for name in ("render", "nominal", "exposure", "thesis_hsv_variants", "tags", "rectification"):
+        tables = ("render", "nominal", "exposure", "thesis_hsv_variants", "tags", "rectification", "thesis_morphology")
+        for name in tables:
             value = getattr(self, name)
             if value is not None and not isinstance(value, Mapping):
                 raise ValueError(f"task.{name}: expected a table, got {value!r}")
+        for key, value in (self.thesis_morphology or {}).items():
+            if key not in MORPHOLOGY_FIELDS:
+                raise ValueError(f"task.thesis_morphology.{key}: expected one of {', '.join(MORPHOLOGY_FIELDS)}")
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"task.thesis_morphology.{key}: expected a whole number >= 0, got {value!r}")
         for name in ("full_frame", "noise", "reference_camera"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, bool):

@@ -13,6 +13,9 @@ into a frame task (:func:`apply`):
                                             ``scenes/data/<file>.toml`` replaced for the frame
                                             (:data:`scenes.data_overrides.DATA_PATHS` lists those a scenario
                                             can replace; a ``data.beacons.<name>.`` one applies to that beacon)
+``tracker.thesis.<field>``                → ``task["thesis_morphology"][field]``: a morphology setting of the
+                                            study's tracker (:data:`TRACKER_FIELDS`) for the sessions in which
+                                            the study says it changed it (``min_range_m`` scopes it to them)
 
 Values are keyed by the unknown's name. All functions are pure; the same seed gives the
 same samples.
@@ -37,14 +40,16 @@ from scenes.scenario import Scenario
 from scenes.sourced import DATA_DIR as SCENE_DATA_DIR
 from scenes.sourced import DataFileError, load_sourced, load_tables
 from scenes.view import camera_names
-from studies.engine.frame_task import FrameTask
+from studies.engine.frame_task import MORPHOLOGY_FIELDS, FrameTask
 
 UNKNOWNS_FILE = Path(__file__).resolve().parents[1] / "data" / "unknowns.toml"
 KINDS = ("uniform", "loguniform", "choice", "fixed")
 CAMERA_GROUPS = ("lens", "sensor", "isp", "exposure", "effects")
 """Camera-model parts a run may override (the geometry is fixed by the camera name: the render uses it)."""
+TRACKER_FIELDS = MORPHOLOGY_FIELDS
+"""Settings of the study's tracker an unknown may set (:data:`studies.engine.frame_task.MORPHOLOGY_FIELDS`)."""
 METHODS = ("sobol", "lhs", "random")
-_KEYS = {"target", "kind", "low", "high", "choices", "nominal", "unit", "cameras", "source", "assumed"}
+_KEYS = {"target", "kind", "low", "high", "choices", "nominal", "unit", "cameras", "min_range_m", "source", "assumed"}
 
 
 @dataclass(frozen=True)
@@ -69,6 +74,9 @@ class Unknown:
         Unit of the values (empty if dimensionless or not a number).
     cameras
         Camera names it applies to; empty means every camera.
+    min_range_m
+        The nominal range (m) from which it applies (a session of the study's at those ranges);
+        None: at every range.
     provenance
         ``"source: …"`` or ``"assumed: …"``: where the range comes from, or why it is reasonable.
     """
@@ -82,11 +90,12 @@ class Unknown:
     choices: tuple = ()
     unit: str = ""
     cameras: tuple[str, ...] = ()
+    min_range_m: float | None = None
     provenance: str = ""
 
     @property
     def namespace(self) -> str:
-        """``scenario``, ``camera`` or ``data``."""
+        """``scenario``, ``camera``, ``data`` or ``tracker``."""
         return self.target.split(".", 1)[0]
 
     @property
@@ -97,9 +106,10 @@ class Unknown:
     @property
     def acts(self) -> str:
         """How it acts on a frame: ``gain`` (rescales the render exactly: the LED drive and intensity
-        bins), ``render`` (changes the scene rendered) or ``camera`` (the camera model)."""
-        if self.namespace == "camera":
-            return "camera"
+        bins), ``render`` (changes the scene rendered), ``camera`` (the camera model) or ``tracker``
+        (the study's tracker on the same saved frame)."""
+        if self.namespace in ("camera", "tracker"):
+            return self.namespace
         if self.namespace == "data":
             return data_path(self.path)[0].acts
         return GAIN if self.path == "led_current_mA" else RENDER
@@ -111,6 +121,10 @@ class Unknown:
         if self.kind == "fixed":
             return _same(value, self.nominal)
         return _is_number(value) and self.low <= float(value) <= self.high
+
+    def applies_at(self, range_m: float) -> bool:
+        """Whether it acts on a frame at nominal range ``range_m`` (m)."""
+        return self.min_range_m is None or range_m >= self.min_range_m
 
     def describe_range(self) -> str:
         """The range as text: ``0.05-20 mA (loguniform)``, ``black | white``, ``= 3.5``."""
@@ -124,6 +138,10 @@ class Unknown:
 
 def _is_number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(float(x))
+
+
+def _is_count(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= 0
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -161,6 +179,9 @@ def _parse(name: str, table: Any, where: str) -> Unknown:
         raise DataFileError(f"{at}.cameras: expected a list of camera names ({', '.join(camera_names())})")
     if not isinstance(table.get("unit", ""), str):
         raise DataFileError(f"{at}.unit: expected a string")
+    min_range = table.get("min_range_m")
+    if min_range is not None and (not _is_number(min_range) or min_range <= 0):
+        raise DataFileError(f"{at}.min_range_m: expected a range in metres > 0, got {min_range!r}")
     low = high = None
     choices: tuple = ()
     if kind in ("uniform", "loguniform"):
@@ -182,16 +203,21 @@ def _parse(name: str, table: Any, where: str) -> Unknown:
         name=name,
         target=table["target"],
         kind=kind,
-        nominal=float(table["nominal"]) if kind != "choice" and _is_number(table["nominal"]) else table["nominal"],
+        nominal=_nominal_value(table),
         low=low,
         high=high,
         choices=choices,
         unit=table.get("unit", ""),
         cameras=tuple(cameras),
+        min_range_m=None if min_range is None else float(min_range),
         provenance=f"{has[0]}: {table[has[0]]}",
     )
     if not unknown.contains(unknown.nominal):
         raise DataFileError(f"{at}.nominal: {unknown.nominal!r} is outside {unknown.describe_range()}")
+    if unknown.namespace == "tracker" and (
+        kind not in ("choice", "fixed") or not all(_is_count(v) for v in (*unknown.choices, unknown.nominal))
+    ):
+        raise DataFileError(f"{at}: a tracker setting takes whole numbers >= 0 (kind choice or fixed)")
     if unknown.namespace == "data" and not _same(data_file_value(unknown.target), unknown.nominal):
         raise DataFileError(
             f"{at}.nominal: {unknown.nominal!r} differs from the data file's {data_file_value(unknown.target)!r}"
@@ -199,9 +225,21 @@ def _parse(name: str, table: Any, where: str) -> Unknown:
     return unknown
 
 
+def _nominal_value(table: dict) -> Any:
+    """The nominal as given, numbers as floats except a choice's and a tracker setting's (whole
+    iteration counts)."""
+    value = table["nominal"]
+    if table["kind"] != "choice" and not table["target"].startswith("tracker.") and _is_number(value):
+        return float(value)
+    return value
+
+
 def _check_target(target: Any, at: str) -> None:
     if not isinstance(target, str) or "." not in target:
-        raise DataFileError(f"{at}: expected 'scenario.<field>', 'camera.<group>.<field>' or 'data.<file>.<key>'")
+        raise DataFileError(
+            f"{at}: expected 'scenario.<field>', 'camera.<group>.<field>', 'data.<file>.<key>' "
+            "or 'tracker.thesis.<field>'"
+        )
     namespace, path = target.split(".", 1)
     if namespace == "scenario":
         fields = [f.name for f in dataclasses.fields(Scenario) if f.name not in ("render", "data")]
@@ -223,8 +261,11 @@ def _check_target(target: Any, at: str) -> None:
                 f"{at}: {target!r} is not a value a scenario can replace (expected data.<one of "
                 f"{', '.join(DATA_PATHS)}>)"
             ) from None
+    elif namespace == "tracker":
+        if path not in {f"thesis.{f}" for f in TRACKER_FIELDS}:
+            raise DataFileError(f"{at}: expected tracker.thesis.<{'|'.join(TRACKER_FIELDS)}>, got {target!r}")
     else:
-        raise DataFileError(f"{at}: namespace must be 'scenario', 'camera' or 'data', got {namespace!r}")
+        raise DataFileError(f"{at}: namespace must be 'scenario', 'camera', 'data' or 'tracker', got {namespace!r}")
 
 
 def data_file_value(target: str) -> Any:
@@ -325,9 +366,10 @@ def apply(task: dict | FrameTask, values: dict[str, Any], unknowns: dict[str, Un
     Scenario targets go into ``task["scenario"]``, camera targets into
     ``task["camera_overrides"]`` (``"lens.f_number"`` → value), data targets into
     ``task["scenario"]["data"]`` (``"leds.red.luminous_intensity_cd"`` → value) unless the value is
-    the data file's own (then the task stays as a nominal one, with the key it had). Unknowns
-    scoped to other cameras than the task's, and ``data.beacons.<name>.`` ones of another beacon,
-    are skipped. ``task`` itself is left unchanged; the result is the task's plain form
+    the data file's own (then the task stays as a nominal one, with the key it had), tracker
+    targets into ``task["thesis_morphology"]``. Unknowns scoped to other cameras than the task's,
+    to ranges beyond the task's nominal range (``min_range_m``), and ``data.beacons.<name>.`` ones
+    of another beacon, are skipped. ``task`` itself is left unchanged; the result is the task's plain form
     (:meth:`studies.engine.frame_task.FrameTask.coerce` reads it).
     """
     unknowns = load_unknowns() if unknowns is None else unknowns
@@ -336,18 +378,24 @@ def apply(task: dict | FrameTask, values: dict[str, Any], unknowns: dict[str, Un
     camera = scenario.get("camera", Scenario.__dataclass_fields__["camera"].default)
     beacon = scenario.get("beacon", Scenario.__dataclass_fields__["beacon"].default)
     overrides = dict(out.get("camera_overrides") or {})
+    morphology = dict(out.get("thesis_morphology") or {})
     data = dict(scenario.get("data") or {})
+    range_m = (out.get("nominal") or {}).get(
+        "range_m", scenario.get("range_m", Scenario.__dataclass_fields__["range_m"].default)
+    )
     for name, value in values.items():
         if name not in unknowns:
             raise ValueError(f"unknowns: no unknown {name!r} (expected one of {', '.join(unknowns)})")
         u = unknowns[name]
-        if u.cameras and camera not in u.cameras:
+        if (u.cameras and camera not in u.cameras) or not u.applies_at(range_m):
             continue
         value = value.item() if isinstance(value, np.generic) else value
         if u.namespace == "scenario":
             scenario[u.path] = value
         elif u.namespace == "camera":
             overrides[u.path] = value
+        elif u.namespace == "tracker":
+            morphology[u.path.split(".", 1)[1]] = int(value)
         elif u.path.startswith("beacons.") and u.path.split(".")[1] != beacon:
             continue
         elif _same(value, data_file_value(u.target)):
@@ -356,6 +404,8 @@ def apply(task: dict | FrameTask, values: dict[str, Any], unknowns: dict[str, Un
             data[u.path] = float(value)
     if overrides:
         out["camera_overrides"] = overrides
+    if morphology:
+        out["thesis_morphology"] = morphology
     if data:
         scenario["data"] = dict(sorted(data.items()))
     else:

@@ -337,3 +337,21 @@ def test_a_calibrations_nroy_set_is_a_prediction_set(tmp_path):
     pd.DataFrame({"x": [1.0]}).to_csv(path, index=False)
     with pytest.raises(ValueError, match=r"expected a calibration's nroy\.csv .* missing column"):
         prediction_set.load(path)
+
+
+def test_validate_uses_the_studys_per_session_morphology_only_where_it_says_so():
+    """The 10 mm lens's erosion turned down from 4 m (1-3 iterations: spread over the points) and its close
+    off at 5 m (docs/source-study.md §5.3); every other condition keeps the printed 5 closes and 4 erosions."""
+
+    def task(camera, range_m):
+        return {"scenario": {"camera": camera, "range_m": range_m}, "nominal": {"range_m": range_m}, "seed": 0}
+
+    assert validate.session_settings(task("canon-t6-10mm", 4.0), None)["thesis_morphology"] == {"erode_iterations": 2}
+    spread = [validate.session_settings(task("canon-t6-10mm", 4.0), p)["thesis_morphology"] for p in range(6)]
+    assert [m["erode_iterations"] for m in spread] == [1, 2, 3, 1, 2, 3]
+    assert validate.session_settings(task("canon-t6-10mm", 5.0), 0)["thesis_morphology"] == {
+        "erode_iterations": 1,
+        "close_iterations": 0,
+    }
+    for camera, range_m in (("canon-t6-10mm", 3.0), ("canon-t6-18mm", 5.0), ("logitech-c270", 10.0)):
+        assert "thesis_morphology" not in validate.session_settings(task(camera, range_m), 1)

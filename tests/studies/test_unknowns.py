@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from camera_models.camera import load_camera, with_overrides
+from pipeline.thesis_tracker import ThesisTrackerSettings
 from scenes.scenario import RenderSettings, Scenario
 from scenes.sourced import DataFileError
 from studies.engine.frame import camera_with_overrides, capture_frame, frame_inputs
@@ -40,7 +41,8 @@ def registry():
 def test_every_entry_has_target_kind_nominal_and_a_reason(registry):
     assert len(registry) >= 12
     for name, u in registry.items():
-        assert u.name == name and u.kind in KINDS and u.target.split(".")[0] in ("scenario", "camera", "data")
+        assert u.name == name and u.kind in KINDS
+        assert u.target.split(".")[0] in ("scenario", "camera", "data", "tracker")
         assert u.provenance.startswith(("source: ", "assumed: ")) and len(u.provenance) > 40, name
         assert u.contains(u.nominal), name
         if u.kind in ("uniform", "loguniform"):
@@ -120,10 +122,50 @@ def test_apply_sets_scenario_and_camera_fields_and_leaves_the_task_alone(registr
     data = apply(task, {"lit_face_diameter": 14.0, "lit_face_diameter_v1": 11.0, "led_intensity_red": 6.0}, registry)
     assert data["scenario"]["data"] == {"beacons.v2.lit_face_diameter_mm": 14.0, "leds.red.luminous_intensity_cd": 6.0}
     assert Scenario(**data["scenario"]).design.lit_face_diameter_m == pytest.approx(0.014)
-    assert {u.acts for u in registry.values()} == {"gain", "render", "camera"}
+    assert {u.acts for u in registry.values()} == {"gain", "render", "camera", "tracker"}
     assert registry["led_intensity_red"].acts == "gain" and registry["foam_optical_depth"].acts == "render"
     webcam = apply({"scenario": {"camera": "logitech-c270"}}, {"webcam_max_exposure": 0.1}, registry)
     assert webcam["camera_overrides"] == {"exposure.max_exposure_s": 0.1}
+
+
+def test_a_tracker_setting_applies_only_to_its_lens_from_its_range(registry):
+    """The study's per-session morphology (10 mm lens: erosion turned down from 4 m, close off at 5 m)
+    reaches the task's tracker settings only on that lens at or beyond those nominal ranges."""
+    values = {"erode_iterations_10mm_far": 1, "close_iterations_10mm_5m": 0}
+
+    def morphology(camera: str, range_m: float):
+        task = {"scenario": {"camera": camera, "range_m": range_m + 0.03}, "nominal": {"range_m": range_m}, "seed": 0}
+        return apply(task, values, registry).get("thesis_morphology")
+
+    assert morphology("canon-t6-10mm", 3.0) is None  # the jittered range does not decide, the nominal does
+    assert morphology("canon-t6-10mm", 4.0) == {"erode_iterations": 1}
+    assert morphology("canon-t6-10mm", 5.0) == {"erode_iterations": 1, "close_iterations": 0}
+    assert morphology("canon-t6-18mm", 5.0) is None
+
+
+def test_a_turned_down_erosion_keeps_markers_the_printed_one_deletes():
+    """Discs 9 px tall vanish under the printed 4 erosions (13 px needed) and survive 2 (7 px needed):
+    what a task's thesis_morphology does to the study's tracker on the same image."""
+    import cv2
+
+    from pipeline.angles import Intrinsics
+    from pipeline.thesis_tracker import survivor_size, thesis_track
+    from studies.engine.frame import _detectors
+    from studies.engine.frame_task import FrameTask
+
+    image = np.zeros((480, 640, 3), np.uint8)
+    yy, xx = np.mgrid[0:480, 0:640]
+    green = cv2.cvtColor(np.uint8([[(77, 100, 220)]]), cv2.COLOR_HSV2BGR)[0, 0]  # inside the study's green box
+    for u in (200, 260, 320, 380, 440):
+        image[(xx - u) ** 2 + (yy - 240) ** 2 <= 4.5**2] = green
+    webcam = Intrinsics(600.0, 600.0, 319.5, 239.5, 640, 480)
+    task = FrameTask(scenario={}, seed=0, trackers=["thesis"], thesis_morphology={"erode_iterations": 2})
+    ((_, _, turned_down),) = list(_detectors(task))
+    assert survivor_size(ThesisTrackerSettings())[1] == 13 and survivor_size(turned_down)[1] == 7
+    count = [sum(b.colour == "green" for b in thesis_track(image, webcam, s).blobs) for s in (None, turned_down)]
+    assert count == [0, 5]
+    with pytest.raises(ValueError, match=r"task\.thesis_morphology\.min_area: expected one of"):
+        FrameTask(scenario={}, seed=0, thesis_morphology={"min_area": 3})
 
 
 def test_with_overrides_changes_exactly_the_named_field():
@@ -163,6 +205,12 @@ def test_bad_data_file_gives_one_line_naming_file_and_field(tmp_path):
         '[a]\ntarget = "data.beacons.v2.arm_length_mm"\nkind = "fixed"\nnominal = 70.0\n'
         'source = "a reason long enough to count"\n': r"a\.target: 'data\.beacons\.v2\.arm_length_mm' is not a value a "
         "scenario can replace",
+        '[a]\ntarget = "tracker.thesis.min_area"\nkind = "fixed"\nnominal = 0\n'
+        'source = "a reason long enough to count"\n': r"a\.target: expected tracker\.thesis\.<close_iterations\|",
+        '[a]\ntarget = "tracker.thesis.erode_iterations"\nkind = "uniform"\nlow = 1\nhigh = 3\nnominal = 2\n'
+        'source = "a reason long enough to count"\n': r"a: a tracker setting takes whole numbers >= 0",
+        '[a]\ntarget = "tracker.thesis.erode_iterations"\nkind = "fixed"\nnominal = 2\nmin_range_m = -1\n'
+        'source = "a reason long enough to count"\n': r"a\.min_range_m: expected a range in metres > 0, got -1",
     }
     for text, message in cases.items():
         path = tmp_path / "bad.toml"
@@ -203,6 +251,8 @@ def test_cli_lists_the_unknowns():
 
 def _other_value(u):
     """A value of ``u`` away from its nominal: another choice, or the bound farther from it."""
+    if u.kind == "fixed":  # a setting the study states (e.g. its close off at 5 m): the nominal is the change
+        return u.nominal
     if u.kind == "choice":
         return next(c for c in u.choices if c != u.nominal)
     return u.high if u.high - u.nominal >= u.nominal - u.low else u.low
@@ -215,10 +265,14 @@ def _walk(obj, path: str):
 
 
 def test_every_unknown_is_settable_per_task_and_changes_what_it_acts_on(registry):
-    """Each registry entry, set away from its nominal on a task of a camera (and beacon) it applies to:
-    a gain changes the scenario's light but not the scene a render is made of; a render entry changes
-    the scene description (so the render key); a camera entry changes that field of the camera model."""
+    """Each registry entry, set away from its nominal on a task of a camera (and beacon, and range) it
+    applies to: a gain changes the scenario's light but not the scene a render is made of; a render
+    entry changes the scene description (so the render key); a camera entry changes that field of the
+    camera model; a tracker entry changes the study's tracker's settings and neither the scene nor
+    the camera."""
     from scenes.assemble import scene_spec
+    from studies.engine.frame import _detectors
+    from studies.engine.frame_task import FrameTask
 
     seen = set()
     for u in registry.values():
@@ -228,7 +282,7 @@ def test_every_unknown_is_settable_per_task_and_changes_what_it_acts_on(registry
         scenario = {
             "camera": camera,
             "beacon": beacon,
-            "range_m": 3.0,
+            "range_m": max(3.0, u.min_range_m or 0.0),
             "foam": True,
             "paper_sheets": 1,
             "housing": housing,
@@ -243,10 +297,15 @@ def test_every_unknown_is_settable_per_task_and_changes_what_it_acts_on(registry
         elif u.acts == "camera":
             changed = camera_with_overrides(load_camera(camera), out["camera_overrides"])
             assert _walk(changed, u.path) == _other_value(u) != _walk(load_camera(camera), u.path), u.name
+        elif u.acts == "tracker":
+            assert scene_spec(before) == scene_spec(after) and "camera_overrides" not in out, u.name
+            (settings,) = [s for tracker, _, s in _detectors(FrameTask.coerce(out)) if tracker == "thesis"]
+            field = u.path.split(".")[1]
+            assert getattr(settings, field) == _other_value(u) != getattr(ThesisTrackerSettings(), field), u.name
         elif u.acts == "gain":
             assert before != after and before.without_gains() == after.without_gains(), u.name
             assert scene_spec(before) == scene_spec(after), u.name
         else:
             assert scene_spec(before) != scene_spec(after), u.name
         seen.add(u.acts if u.acts != "camera" else u.path.split(".")[0])
-    assert {"gain", "render", "lens", "sensor", "isp", "effects"} <= seen  # every kind, the ISP's white point too
+    assert {"gain", "render", "lens", "sensor", "isp", "effects", "tracker"} <= seen  # every kind
