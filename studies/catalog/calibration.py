@@ -44,6 +44,7 @@ from studies.engine.calibration import (
     Settings,
     from_json,
     history_match,
+    nroy_sample,
     observation_shares,
     to_json,
     write_figures,
@@ -74,6 +75,9 @@ OBSERVATIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "observations
 RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
 """Render settings of the calibration's frames (close range: the target alone is in view)."""
 QUICK_RENDER = {**RENDER, "near_field_spp": 256}
+NROY_SAMPLE = 256
+"""Points of the NROY set ``nroy.csv`` holds (drawn from it: the reference sample's few survivors of a
+small set are too few to predict from)."""
 """The quick form's: near fields at a quarter of the samples. Measured on V1's red marker (foam + one
 sheet): the radial profile's centre bin (1/144 of the face's area) scatters ±16 % over seeds at 256
 samples and ±11 % at 1 024; the outer bins ±5 %. A near field is 16 s of one core at 1 024 samples
@@ -416,18 +420,20 @@ def run(
 
 
 def write_outputs(result: HistoryMatch, observed: Sequence[Observed], out: Path) -> None:
-    """``nroy.csv``, the figures, ``summary.json`` and ``report.html`` of a match (also of one read back
-    from its ``history.json`` while it is still running: they then say "running")."""
+    """``nroy.csv`` (:data:`NROY_SAMPLE` points not ruled out, :func:`nroy_sample`), the figures,
+    ``summary.json`` and ``report.html`` of a match (also of one read back from its ``history.json``
+    while it is still running: they then say "running")."""
     out = Path(out)
-    values = result.space.values(result.nroy_points) if len(result.nroy_points) else []
+    sample = nroy_sample(result, NROY_SAMPLE)
+    values = result.space.values(sample[0]) if len(sample[0]) else []
     nroy = pd.DataFrame(values) if values else pd.DataFrame(columns=list(result.space.names))
     atomic_write_bytes(out / "nroy.csv", nroy.to_csv(index=False, float_format="%.6g").encode())
     write_figures(result, out)
-    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed), indent=2).encode())
-    write_report(result, observed, out)
+    atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed, sample), indent=2).encode())
+    write_report(result, observed, out, sample)
 
 
-def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
+def summary(result: HistoryMatch, observed: Sequence[Observed], sample: tuple[np.ndarray, int] | None = None) -> dict:
     """What the match found, in plain data: waves with their NROY fraction, why it stopped, and per
     observation its condition and the discrepancy it needed."""
     alone, without = observation_shares(result)
@@ -445,6 +451,7 @@ def summary(result: HistoryMatch, observed: Sequence[Observed]) -> dict:
             for w in result.waves
         ],
         "nroy_points": len(result.nroy_points),
+        "nroy_sample": dict(zip(("points", "drawn"), _sample_counts(result, sample), strict=True)),
         "discrepancy": [
             {
                 "observation": d.observation,
@@ -484,11 +491,17 @@ PINNED = 0.8
 for a categorical one, of its choices)."""
 
 
-def input_table(result: HistoryMatch) -> pd.DataFrame:
+def _sample_counts(result: HistoryMatch, sample: tuple[np.ndarray, int] | None) -> tuple[int, int]:
+    points, drawn = nroy_sample(result, NROY_SAMPLE) if sample is None else sample
+    return len(points), drawn
+
+
+def input_table(result: HistoryMatch, points: np.ndarray | None = None) -> pd.DataFrame:
     """Per input, most constraining first (:func:`studies.engine.calibration.plots.ranked_inputs`): its
     range, and the NROY set's 5-95 % span (continuous) or the choices it keeps (categorical), with
-    the share of the range that span covers."""
-    q = result.nroy_points
+    the share of the range that span covers; over ``points`` (unit points of the NROY set, e.g.
+    :func:`nroy_sample`'s; default the reference sample's survivors)."""
+    q = result.nroy_points if points is None else points
     rows = []
     for i in ranked_inputs(result):
         inp = result.space.inputs[i]
@@ -518,10 +531,14 @@ def input_table(result: HistoryMatch) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) -> Path:
+def write_report(
+    result: HistoryMatch, observed: Sequence[Observed], out: Path, sample: tuple[np.ndarray, int] | None = None
+) -> Path:
     """``report.html``: what the match found, in words first, then the figures and tables (waves,
-    inputs, observations with the discrepancy each needs, emulator diagnostics)."""
+    inputs over the NROY sample ``sample`` (:func:`nroy_sample`: points, drawn), observations with the
+    discrepancy each needs, emulator diagnostics)."""
     out = Path(out)
+    points, drawn = nroy_sample(result, NROY_SAMPLE) if sample is None else sample
     frames = len({o.frame for o in observed})
     runs = sum(len(w.design) for w in result.waves)
     plural = "" if len(result.waves) == 1 else "s"
@@ -546,18 +563,20 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
             'of a computer experiment"): what the emulators rule out between the runs is their guess; the '
             "simulated outputs below are the evidence."
         )
-    if 0 < len(result.nroy_points) < DESCRIBED:
+    found = (
+        f"Not ruled out (NROY): {result.nroy_fraction:.3g} of the space ({len(result.nroy_points)} of "
+        f"{result.settings.n_reference} reference points); nroy.csv holds {len(points)} points drawn from it "
+        f"({len(points)} of {drawn} Sobol' points passed every wave)"
+    )
+    if 0 < len(points) < DESCRIBED:
         lead.append(
-            f"Not ruled out (NROY): {result.nroy_fraction:.3g} of the space, only {len(result.nroy_points)} of "
-            f"{result.settings.n_reference} reference points: too few to describe by ranges (they are in nroy.csv). "
-            "The discrepancy table says which observations leave so little."
+            f"{found}: too few to describe by ranges. The discrepancy table says which observations leave so little."
         )
-    elif len(result.nroy_points):
-        table = input_table(result)
+    elif len(points):
+        table = input_table(result, points)
         pinned = table[table["share kept"] < PINNED]
         lead.append(
-            f"Not ruled out (NROY): {result.nroy_fraction:.3g} of the space ({len(result.nroy_points)} of "
-            f"{result.settings.n_reference} reference points). "
+            f"{found}. "
             + (
                 "Narrowed: " + "; ".join(f"{r.input} to {r.NROY} (range {r.range})" for r in pinned.itertuples())
                 if len(pinned)
@@ -603,7 +622,7 @@ def write_report(result: HistoryMatch, observed: Sequence[Observed], out: Path) 
         )
     )
     rep.heading("Unknowns, most constraining first")
-    rep.table(input_table(result), formats={"share kept": "{:.2f}"})
+    rep.table(input_table(result, points), formats={"share kept": "{:.2f}"})
     rep.heading("Observations and the discrepancy each needs")
     need = {d.observation: d for d in result.discrepancy}
     alone, without = observation_shares(result)

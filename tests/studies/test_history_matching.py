@@ -32,6 +32,7 @@ from studies.engine.calibration import (
     history_match,
     implausibility,
     nroy_mask,
+    nroy_sample,
     observation_shares,
     required_discrepancy_var,
     to_json,
@@ -118,6 +119,23 @@ def check_planted(result, analytic):
 def test_planted_region_is_recovered(planted, analytic):
     check_planted(planted, analytic)
     assert 0.015 < analytic[1].mean() < 0.022  # the toy is what the docstring says
+
+
+def test_the_nroy_sample_lies_in_the_planted_region(planted, analytic):
+    """nroy.csv's points: n of them, each passing every wave, nearly all inside the analytic region, found
+    at the NROY fraction's rate, the same ones on every call."""
+    points, drawn = nroy_sample(planted, 256)
+    assert points.shape == (256, 3) and nroy_mask(planted, points).all()
+    f = truth(*unit_to_natural(points))
+    inside = np.max(np.abs(f - Z_STAR) / math.sqrt(NOISE_SD**2 + 2 * SD**2), axis=1) <= 3.0
+    assert inside.mean() > 0.85  # the emulators' boundary error, as check_planted allows
+    assert abs(256 / drawn / planted.nroy_fraction - 1) < 0.3  # drawn in 4096-point blocks: coarse
+    again, _ = nroy_sample(planted, 256)
+    np.testing.assert_array_equal(points, again)
+    few, _ = nroy_sample(planted, 10, max_points=4096)
+    assert len(few) == 10 and np.array_equal(few, points[:10])
+    with pytest.raises(ValueError, match=r"n: expected an integer >= 1, got 0"):
+        nroy_sample(planted, 0)
 
 
 @pytest.mark.slow

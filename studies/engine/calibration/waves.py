@@ -54,6 +54,7 @@ __all__ = [
     "from_json",
     "history_match",
     "nroy_mask",
+    "nroy_sample",
     "observation_shares",
     "reference_implausibility",
     "to_json",
@@ -264,6 +265,36 @@ def nroy_mask(result: HistoryMatch, q: np.ndarray) -> np.ndarray:
     """(n,) True where unit points ``q`` are not ruled out by any of the result's waves."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     return _inside(result.waves, result.space, result.observations, result.settings, q)
+
+
+def nroy_sample(result: HistoryMatch, n: int, *, max_points: int | None = None) -> tuple[np.ndarray, int]:
+    """Up to ``n`` points of the whole space not ruled out by any wave: scrambled Sobol' points (seeded
+    by the match's seed) drawn in blocks until ``n`` pass or ``max_points`` (default 4 ×
+    ``Settings.max_candidates``) were drawn, in Sobol' order.
+
+    The reference sample estimates the NROY fraction; when that fraction is small it holds only a
+    handful of survivors, too few to predict from (:mod:`studies.catalog.prediction_set` takes 20);
+    this draws the set a prediction is made from.
+
+    Returns
+    -------
+    points, drawn
+        (k ≤ n, d) unit points and how many were drawn to find them (k / drawn estimates the NROY
+        fraction again).
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n: expected an integer >= 1, got {n!r}")
+    limit = 4 * result.settings.max_candidates if max_points is None else max_points
+    if not result.waves or result.nroy_fraction == 0:  # empty on the reference sample: the match says so
+        return np.empty((0, result.space.dim)), 0
+    region = sample_region(
+        lambda q: nroy_mask(result, q),
+        result.space.dim,
+        n_wanted=n,
+        seed=_seed(result.settings.seed, 4),
+        max_points=limit,
+    )
+    return region.points[:n], region.n_drawn
 
 
 def observation_shares(result: HistoryMatch) -> tuple[np.ndarray, np.ndarray]:
