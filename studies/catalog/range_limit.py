@@ -35,6 +35,7 @@ from studies.engine.sequential import SequentialDesign, decision_text, design_ev
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import pose_outcomes, write_tables
 from studies.engine.tasks import StudyOptions, grid_conditions
+from studies.engine.uncertainty import physics_interval
 
 NAME = "range-limit"
 PLANNED_RANGE_M = 10.0
@@ -108,7 +109,8 @@ def run(
     if design is None:
         frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
         return write_outputs(out, options, frame)
-    result = run_design(NAME, options, design, out, UNIT_FIELDS, estimators=["best"], execution=execution)
+    fields = UNIT_FIELDS + ((("point", "point"),) if options.physics else ())  # each point a unit of its own
+    result = run_design(NAME, options, design, out, fields, estimators=["best"], execution=execution)
     return write_outputs(out, options, write_tables(out, result.rows), result.summary())
 
 
@@ -140,6 +142,10 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     record says how many frames decided its limits (``decision``; ``far_decided``,
     ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
+    at_points = frame[frame["point"].notna()] if "point" in frame else frame.iloc[:0]
+    if len(at_points):
+        frame = frame[frame["point"].isna()]
+    physics = _physics_limits(at_points)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
         cam, beacon, side, current, yaw, tracker = key
@@ -159,8 +165,11 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
             far_interval=far_interval_text(rec),
             failures_nearer=near_failures_text(rec),
         )
+        if key in physics:
+            iv = physics_interval(physics[key])
+            rec.update(far_physics=iv.to_dict(), far_interval_physics=physics_interval_text(iv))
         if design is not None:
-            unit = units.get((cam, beacon, side, float(current), float(yaw)))
+            unit = units.get((cam, beacon, side, float(current), float(yaw)) + ((None,) if physics else ()))
             rec.update(
                 decision=decision_text(rec, unit),
                 far_decided=bool(unit and unit["far_decided"]),
@@ -183,6 +192,25 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     if design is not None:
         summary["design"] = design
     return summary
+
+
+def _physics_limits(rows: pd.DataFrame) -> dict[tuple, list[float]]:
+    """Per :data:`GROUP` key, the far limit at each point of the unknowns (m; ∞ for "≥ the farthest
+    range tried", 0 where no range works)."""
+    out: dict[tuple, list[float]] = {}
+    if rows.empty:
+        return out
+    for key, g in rows.groupby([*GROUP, "point"], sort=True):
+        mr = estimate_max_range(g.to_dict("records"))
+        limit = math.inf if mr.at_least else max(float(mr.max_range_m), 0.0)
+        out.setdefault(tuple(key[:-1]), []).append(limit)
+    return out
+
+
+def physics_interval_text(iv) -> str:
+    """ "3.1 to ≥ 20 m (88 %, 16 points)": a :class:`studies.engine.uncertainty.PhysicsInterval`."""
+    high = "≥ the farthest tried" if math.isinf(iv.high) else f"{iv.high:.3g}"
+    return f"{iv.low:.3g} to {high} m ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 
 def lead_lines(summary: dict) -> list[str]:

@@ -277,6 +277,9 @@ def candidate_ranges(coarse: Sequence[float], design: SequentialDesign) -> tuple
 
 
 def _rng(design: SequentialDesign, round_index: int, key: tuple, limit: str) -> np.random.Generator:
+    """The stream of a unit's choices; a unit field it lacks (None: a nominal unit beside points of
+    the unknowns) does not enter it, so such a unit draws as it would in a run without them."""
+    key = tuple(k for k in key if k is not None)
     digest = hashlib.sha256(repr((design.seed, round_index, key, limit)).encode()).digest()
     return np.random.default_rng(int.from_bytes(digest[:8], "little"))
 
@@ -426,7 +429,7 @@ def _units(conditions: Sequence[dict], unit_fields: Sequence[tuple[str, str]]) -
     """Base conditions (range removed) of each unit, in order of first appearance."""
     units: dict[tuple, list[dict]] = {}
     for c in conditions:
-        key = tuple(c[f] for f, _ in unit_fields)
+        key = tuple(c.get(f) for f, _ in unit_fields)  # a field some conditions lack (a point): None
         base = {k: v for k, v in c.items() if k != "range_m"}
         if base not in units.setdefault(key, []):
             units[key].append(base)
@@ -495,7 +498,7 @@ def run_design(
         all_rows += rows
         for row in rows:
             if select(row):
-                key = tuple(row[c] for _, c in unit_fields)
+                key = tuple(row.get(c) for _, c in unit_fields)
                 if key not in fitted:
                     raise ValueError(f"unit_fields: row of unit {key} matches no unit of the grid")
                 fitted[key].append(row)

@@ -13,6 +13,12 @@ condition's geometry and the jitter index), so detection probabilities are not t
 a single lucky pose. ``jitter_poses`` jittered poses are rendered per condition; seeds
 cycle over them. The jitter does not depend on the LED drive, so every drive of a
 condition sees the same poses: drive sweeps are paired and reuse one render per pose.
+
+With points of the unknowns (:attr:`StudyOptions.physics`, ``--uncertainty``) every nominal
+condition is run once more at each point: the condition gains ``"point": i`` and its frames the
+point's values (:func:`studies.engine.unknowns.apply`) and the tag ``point``; the nominal run
+stays as it was (same tasks, same stored frames), so its noise-and-pose interval sits beside the
+noise + physics one (:mod:`studies.engine.uncertainty`).
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from scenes.environment import ENVIRONMENT_NAMES
 from scenes.led import SIDE_COLOURS, led_for_side
 from scenes.scenario import MAX_RANGE_M
 from scenes.view import camera_names
+from studies.engine.unknowns import apply, load_unknowns
 
 FRAMES = ("full", "crop")
 """What a study's frames are: ``full``, the camera's whole saved frame (the rendered crop inside
@@ -58,6 +65,9 @@ class StudyOptions:
     render: dict = field(default_factory=lambda: dict(RENDER))
     frame: str = "full"
     """One of :data:`FRAMES`: the whole frame (default) or the rendered crop only."""
+    physics: tuple[dict, ...] = ()
+    """Points of the unknowns (registry name → value) each condition is also run at (empty: the
+    nominal run only)."""
 
     def validate(self) -> None:
         """Fail fast, before any work, with one line naming the bad option."""
@@ -92,6 +102,13 @@ class StudyOptions:
             raise ValueError(f"seeds: expected an integer >= 1, got {self.seeds!r}")
         for foam, sheets, colour in self.diffusers:
             DiffuserConfig(foam, sheets, colour).validate()
+        registry = load_unknowns() if self.physics else {}
+        for i, point in enumerate(self.physics):
+            for name, value in point.items():
+                if name not in registry:
+                    raise ValueError(f"physics[{i}].{name}: not an unknown (beacon-sim unknowns lists them)")
+                if not registry[name].contains(value):
+                    raise ValueError(f"physics[{i}].{name}: {value!r} is outside {registry[name].describe_range()}")
 
     def with_overrides(self, **overrides) -> StudyOptions:
         """These options with the user's non-None overrides."""
@@ -156,6 +173,7 @@ def grid_conditions(o: StudyOptions, order: Sequence[str] = tuple(GRID_AXES)) ->
                 "paper_colour": colour,
             }
         )
+        out += [{**out[-1], "point": i} for i in range(len(o.physics))]
     return out
 
 
@@ -201,11 +219,15 @@ def frame_task(
 ) -> dict:
     """The frame task of one condition and noise seed index ``seed`` (≥ 0; jittered pose
     ``seed % options.jitter_poses``): what :func:`frame_tasks` makes for each seed, and what a
-    sequential design (:mod:`studies.engine.sequential`) makes for the seeds it adds."""
+    sequential design (:mod:`studies.engine.sequential`) makes for the seeds it adds. A condition's
+    ``point`` (index into ``options.physics``) sets that point's unknowns and tags the frame; the
+    pose jitter does not depend on it (the points are paired)."""
     if options.frame not in FRAMES:
         raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {options.frame!r}")
     if not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    point = condition.get("point")
+    condition = {k: v for k, v in condition.items() if k != "point"}
     j = jitter(condition, seed % options.jitter_poses)
     scenario = dict(condition)
     scenario["range_m"] = round(condition["range_m"] * j["range_scale"], 9)
@@ -225,4 +247,7 @@ def frame_task(
         task["trackers"] = list(trackers)
     if estimators:
         task["estimators"] = list(estimators)
+    if point is not None:
+        task = apply(task, options.physics[point])
+        task["tags"] = {**(task.get("tags") or {}), "point": point}
     return task

@@ -1,0 +1,105 @@
+"""Intervals that include the physics: a limit's spread over points of the unknowns, with its noise.
+
+A study run at N points of the unknowns (a calibration's NROY set, or the registry's ranges)
+estimates a limit at each point i, L̂_i (the fit of :mod:`studies.engine.max_range`, with the
+noise of its frames and poses). The true hardware is one more point of the same set, unknown. If
+the N points are draws from the set (exchangeable with the truth), the truth's limit L* lies
+between the k-th smallest and the k-th largest of the N limits with probability 1 − 2k/(N + 1)
+(order statistics: every rank of L* among the N + 1 is equally likely). The estimates carry their
+frames' noise on top, which spreads them a little wider than the limits themselves, so the
+interval between the k-th smallest and k-th largest *estimate* holds L* at least that often (the
+*noise + physics* interval; tests/studies/test_uncertainty.py measures both on a planted truth).
+Nothing is assumed of how the limit depends on the unknowns, and a censored estimate ("≥ the
+largest range tried": ∞) keeps its rank: an interval whose k-th largest is censored says "≥".
+
+With N = 16 and k = 1 the rate is 1 − 2/17 = 88 %; 95 % needs N ≥ 39. The rate is reported
+beside the interval, never rounded up.
+
+Example
+-------
+>>> iv = physics_interval([3.0, 6.0, 4.5])
+>>> (iv.low, iv.high, round(iv.rate, 2), iv.order)
+(3.0, 6.0, 0.5, 1)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["PhysicsInterval", "order_for", "physics_interval"]
+
+
+@dataclass(frozen=True)
+class PhysicsInterval:
+    """A noise + physics interval over points of the unknowns.
+
+    Attributes
+    ----------
+    low, high
+        The interval, in the limit's unit (m); ``high`` is ∞ when the k-th largest estimate is
+        censored ("≥ the largest range tried").
+    rate
+        Its coverage: 1 − 2k/(N + 1) (at least, with the estimates' noise).
+    points
+        N, the points it is made from.
+    order
+            k, the rank of its ends among the points' estimates.
+    """
+
+    low: float
+    high: float
+    rate: float
+    points: int
+    order: int
+
+    def to_dict(self) -> dict:
+        """Plain form (``high`` None when censored, for strict JSON)."""
+        return {
+            "low": self.low,
+            "high": None if math.isinf(self.high) else self.high,
+            "rate": self.rate,
+            "points": self.points,
+            "order": self.order,
+        }
+
+
+def order_for(points: int, rate: float = 0.95) -> int:
+    """The largest k ≥ 1 with 1 − 2k/(N + 1) ≥ ``rate`` (1 when even k = 1 falls short: the interval
+    then states its lower rate)."""
+    if not isinstance(points, int) or points < 1:
+        raise ValueError(f"points: expected an integer >= 1, got {points!r}")
+    if not 0 < rate < 1:
+        raise ValueError(f"rate: expected a number in (0, 1), got {rate!r}")
+    return max(1, math.floor((1 - rate) * (points + 1) / 2))
+
+
+def physics_interval(limits: Sequence[float], *, rate: float = 0.95) -> PhysicsInterval:
+    """The noise + physics interval of a limit from its estimate at each point (module docstring).
+
+    Parameters
+    ----------
+    limits
+        Per point, the estimated limit (m); ``inf`` for "≥ the largest range tried"; NaN is refused
+        (a point without an estimate must be dropped, and said so, by the caller).
+    rate
+        The coverage wanted; the interval uses the largest order k that reaches it, and states
+        the rate it has.
+
+    Returns
+    -------
+    PhysicsInterval
+    """
+    x = np.asarray(limits, dtype=float)
+    if x.ndim != 1 or len(x) == 0:
+        raise ValueError(f"limits: expected a non-empty sequence of numbers, got shape {x.shape}")
+    if np.isnan(x).any() or (x == -np.inf).any():
+        raise ValueError("limits: expected numbers or inf, no NaN (drop points without an estimate)")
+    n = len(x)
+    k = order_for(n, rate)
+    ranked = np.sort(x)
+    return PhysicsInterval(low=float(ranked[k - 1]), high=float(ranked[n - k]), rate=1 - 2 * k / (n + 1),
+                           points=n, order=k)  # fmt: skip

@@ -1,0 +1,114 @@
+"""studies.engine.uncertainty: the noise + physics interval covers a planted truth at the rate it states."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from studies.engine.uncertainty import order_for, physics_interval
+
+
+def _coverage(n_points: int, trials: int, noise_m: float, seed: int) -> tuple[float, float]:
+    """A toy study: the far limit is L(θ) = 4 + 8 θ² m of one planted unknown θ ~ U(0, 1); at each of
+    ``n_points`` drawn θ_i the study estimates L(θ_i) with normal noise (sd ``noise_m``, its frames');
+    the truth is one more draw θ*. Returns (how often the interval held L(θ*), its rate)."""
+    rng = np.random.default_rng(seed)
+    held, rate = 0, math.nan
+    for _ in range(trials):
+        theta = rng.random(n_points)
+        truth = 4 + 8 * rng.random() ** 2
+        estimate = 4 + 8 * theta**2 + rng.normal(0.0, noise_m, n_points)
+        iv = physics_interval(estimate)
+        held += iv.low <= truth <= iv.high
+        rate = iv.rate
+    return held / trials, rate
+
+
+@pytest.mark.parametrize(("n_points", "rate"), [(16, 1 - 2 / 17), (39, 0.95), (79, 0.95)])
+def test_the_interval_covers_a_planted_truth_at_its_stated_rate(n_points, rate):
+    trials = 3000
+    covered, stated = _coverage(n_points, trials, noise_m=0.3, seed=n_points)
+    assert stated == pytest.approx(rate)
+    se = math.sqrt(rate * (1 - rate) / trials)
+    # at least the stated rate (within 3 standard errors), and not far above it: the estimates' noise
+    # spreads them a little (the ranks alone give exactly the rate)
+    assert rate - 3 * se <= covered <= rate + 0.03
+
+
+def test_without_noise_the_ranks_alone_give_the_rate_exactly():
+    covered, rate = _coverage(39, 4000, noise_m=1e-9, seed=1)
+    assert abs(covered - rate) < 3 * math.sqrt(rate * (1 - rate) / 4000)
+
+
+def test_order_and_censored_ends():
+    assert [order_for(n) for n in (1, 16, 38, 39, 79, 119)] == [1, 1, 1, 1, 2, 3]
+    iv = physics_interval([2.0, math.inf, 5.0, math.inf])
+    assert iv.high == math.inf and iv.to_dict()["high"] is None and iv.low == 2.0
+    many = physics_interval(np.arange(79.0)[::-1])
+    assert (many.low, many.high, many.order) == (1.0, 77.0, 2)  # 2nd smallest, 2nd largest
+    assert many.rate == pytest.approx(1 - 4 / 80)
+
+
+@pytest.mark.parametrize(
+    ("limits", "message"),
+    [([], r"limits: expected a non-empty sequence"), ([1.0, math.nan], r"no NaN"), ([[1.0]], r"shape \(1, 1\)")],
+)
+def test_bad_input_is_one_line(limits, message):
+    with pytest.raises(ValueError, match=message) as err:
+        physics_interval(limits)
+    assert "\n" not in str(err.value)
+
+
+def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monkeypatch, tmp_path):
+    """range-limit at points of a planted unknown (the red LEDs' intensity bin) on fake frames whose
+    logistic fall-off moves with it: the nominal run keeps its own frames and interval, and the noise +
+    physics interval spans the points' limits (their known truth) at the rate it states."""
+    import hashlib
+    import json
+
+    from studies.catalog import range_limit
+    from studies.engine import sequential
+    from studies.engine.max_range import LN19
+    from studies.engine.tasks import StudyOptions
+    from studies.engine.unknowns import load_unknowns, sample
+
+    def r50(task) -> float:  # the fall-off's midpoint, m: 3 m more per candela of the bin
+        cd = (task["scenario"].get("data") or {}).get("leds.red.luminous_intensity_cd", 5.1)
+        return 8.0 + 3.0 * (cd - 5.1)
+
+    def rows(tasks, out, execution, description=""):
+        made = []
+        for task in tasks:
+            sc = task["scenario"]
+            u = int.from_bytes(hashlib.sha256(json.dumps(task, sort_keys=True).encode()).digest()[:8], "little")
+            ok = u / 2**64 < 1 / (1 + math.exp((sc["range_m"] - r50(task)) / 0.4))
+            made.append({**sc, **(task.get("tags") or {}), "nominal_range_m": task["nominal"]["range_m"],
+                         "nominal_yaw_deg": task["nominal"]["yaw_deg"], "seed": task["seed"], "tracker": "best",
+                         "estimator": "best", "detected": ok, "side_correct": ok, "numbering_correct": ok,
+                         "range_err_m": 0.01 if ok else math.nan, "yaw_err_deg": 0.1 if ok else math.nan,
+                         "failure": "" if ok else "no-blobs", "reason": ""})  # fmt: skip
+        return made
+
+    monkeypatch.setattr(sequential, "run_frames", rows)
+    registry = load_unknowns()
+    points = tuple(
+        {"led_intensity_red": p["led_intensity_red"]}
+        for p in sample({"led_intensity_red": registry["led_intensity_red"]}, 16, seed=3)
+    )
+    base = StudyOptions(cameras=("canon-t6-18mm",), ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0), seeds=3)
+    design = sequential.SequentialDesign(target_relative=0.2, max_range_m=20.0)
+    nominal = range_limit.run(tmp_path / "nominal", base, design=design)["max_range"][0]
+    rec = range_limit.run(tmp_path / "physics", base.with_overrides(physics=points), design=design)["max_range"][0]
+    assert {k: rec[k] for k in ("max_range_m", "low_m", "high_m", "frames")} == {
+        k: nominal[k] for k in ("max_range_m", "low_m", "high_m", "frames")
+    }  # the nominal run is the same frames with or without the points
+    truths = sorted(8.0 + 3.0 * (p["led_intensity_red"] - 5.1) - 0.4 * LN19 for p in points)
+    iv = rec["far_physics"]
+    assert iv["points"] == 16 and iv["rate"] == pytest.approx(1 - 2 / 17)
+    assert iv["low"] == pytest.approx(truths[0], abs=1.0) and iv["high"] == pytest.approx(truths[-1], abs=1.0)
+    assert iv["low"] < nominal["low_m"] and iv["high"] > nominal["high_m"]  # physics widens it
+    assert "(88 %, 16 points)" in rec["far_interval_physics"]
+    with pytest.raises(ValueError, match=r"physics\[0\]\.led_intensity_red: 99 is outside"):
+        base.with_overrides(physics=({"led_intensity_red": 99},)).validate()
