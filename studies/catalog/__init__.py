@@ -25,6 +25,10 @@ SEQUENTIAL: dict[str, ModuleType] = {m.NAME: m for m in (webcam_vs_dslr, range_l
 (:mod:`studies.engine.sequential`): they have ``default_design(quick)`` and take
 ``run(..., design=...)``."""
 
+PHYSICS: dict[str, ModuleType] = {m.NAME: m for m in (range_limit,)}
+"""Studies that state noise + physics intervals beside their noise ones (``--uncertainty``,
+:attr:`studies.engine.tasks.StudyOptions.physics`)."""
+
 MAIN_JOB_DESIGNS = ("range-limit",)
 """The studies of :data:`MAIN_JOB` that place their frames by their quick sequential design:
 ``range-limit`` decides every camera's far limit at 0° and 30° (the index's "how far");

@@ -31,12 +31,16 @@ import numpy as np
 import pandas as pd
 
 from studies.catalog import calibration, unknowns_search
-from studies.engine.unknowns import Unknown, apply
+from studies.engine.unknowns import Unknown, apply, sample
 
-__all__ = ["CALIBRATION", "SEARCH", "PredictionSet", "load"]
+__all__ = ["CALIBRATION", "REFERENCE_NROY", "SEARCH", "PredictionSet", "load", "physics_points"]
 
 CALIBRATION = "calibration"
 SEARCH = "unknowns-search"
+REFERENCE_NROY = Path(__file__).resolve().parents[2] / "results" / "calibration" / "nroy.csv"
+"""The NROY set of the project's own history match (``beacon-sim calibrate-unknowns``, ``results/calibration``)."""
+STUDY_AXES = ("led_drive",)
+"""Unknowns a study sweeps itself (the LED drive is a grid axis), so no point of the physics sets them."""
 
 
 @dataclass(frozen=True)
@@ -121,3 +125,38 @@ def _plain(v: Any, u: Unknown) -> Any:
                 return c
         raise ValueError(f"{u.name}: {v!r} is not one of its choices ({u.describe_range()})")
     return float(v) if isinstance(v, int | float) and math.isfinite(float(v)) else v
+
+
+def physics_points(n: int, seed: int = 0, calibration: Path | None = REFERENCE_NROY) -> tuple[tuple[dict, ...], str]:
+    """``n`` points of the unknowns a study runs at for its noise + physics intervals
+    (:attr:`studies.engine.tasks.StudyOptions.physics`), and what they are, in words.
+
+    Every registry entry a study does not sweep itself (:data:`STUDY_AXES`) and that is not one of the
+    study's later sessions' tracker settings gets a value: those the calibration covered from its NROY
+    set (``calibration``, a history match's ``nroy.csv``: ``n`` of its points, evenly over it), the
+    others, and all of them without a calibration, from their registry ranges (scrambled Sobol',
+    ``seed``). Cameras and beacons the calibration did not observe are then predicted over their ranges.
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {n!r}")
+    registry = {
+        k: u for k, u in unknowns_search.load_unknowns().items() if k not in STUDY_AXES and u.namespace != "tracker"
+    }
+    points = sample(registry, n, seed=seed)
+    if calibration is None:
+        return tuple(
+            points
+        ), f"{n} points of the {len(registry)} unknowns from their registry ranges (Sobol', seed {seed})"
+    chosen = load(calibration, n)
+    if chosen.source != CALIBRATION:
+        raise ValueError(f"{calibration}: expected a calibration's nroy.csv, got an unknowns search's samples")
+    covered = sorted(set(registry) & set(chosen.space))
+    for i, point in enumerate(points):
+        point.update({k: chosen.points[i % len(chosen.points)][k] for k in covered})
+    reused = ", reused" if len(chosen.points) < n else ""
+    which = (
+        f"{n} points: {len(covered)} of the {len(registry)} unknowns from the calibration's NROY set "
+        f"({Path(calibration).name}, {len(chosen.points)} of its points{reused}), "
+        f"the other {len(registry) - len(covered)} from their registry ranges (Sobol', seed {seed})"
+    )
+    return tuple(points), which

@@ -62,6 +62,8 @@ ANSWER_LABELS = {
     "correct": "correct frames",
 }
 """Columns of the answer table and their headers."""
+PHYSICS_LABEL = {"far_interval_physics": "far limit, noise + physics"}
+"""The answer table's column with ``--uncertainty`` (the rate and points are in each cell)."""
 DECISION_LABEL = {"decision": "frames that decided it"}
 """The answer table's extra column when a sequential design placed the frames."""
 
@@ -126,6 +128,8 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design:
         placed the frames.
     """
     summary = analyse(frame, design)
+    if options.physics:
+        summary["physics"] = {"points": len(options.physics), "source": options.physics_source}
     _report(Path(out), options, frame, summary)
     atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
@@ -258,7 +262,7 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
     import matplotlib.pyplot as plt
 
     rep = Report("Range limit: how far each camera localises the beacon, versus yaw")
-    rep.lead([*lead_lines(summary), _evidence_note(summary)])
+    rep.lead([*lead_lines(summary), _evidence_note(summary), *_physics_note(summary)])
     rep.text(
         f"Cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; sides "
         f"{', '.join(options.sides)}; LED drive {', '.join(f'{c:g}' for c in options.currents_mA)} mA; yaw "
@@ -301,7 +305,11 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
             correct=[f"{s} of {n}" for s, n in zip(table.successes, table.frames, strict=True)],
             failures_nearer=[t or "– (none tried nearer)" for t in table.failures_nearer],
         )
-        labels = {**ANSWER_LABELS, **(DECISION_LABEL if "decision" in answers else {})}
+        labels = {
+            **ANSWER_LABELS,
+            **(PHYSICS_LABEL if "far_interval_physics" in answers else {}),
+            **(DECISION_LABEL if "decision" in answers else {}),
+        }
         rep.table(
             answers[list(labels)],
             f"Working range per camera and yaw, {label}",
@@ -347,6 +355,19 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
                 css_class="keys",
             )
     rep.write(out / "report.html")
+
+
+def _physics_note(summary: dict) -> list[str]:
+    """What the noise + physics intervals rest on, when the run states them."""
+    physics = summary.get("physics")
+    if not physics:
+        return []
+    return [
+        f"Noise + physics: each condition also ran at {physics['source']}. The far limit's noise + physics "
+        "interval lies between the k-th smallest and k-th largest of those points' limits, a predictive interval "
+        "for hardware drawn from the same set at the rate it states (studies/engine/uncertainty.py); the 95 % "
+        "interval beside it is the noise and pose of the nominal point alone."
+    ]
 
 
 def _design_words(summary: dict) -> str:

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, SEQUENTIAL, STUDIES, prediction_set
+from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, PHYSICS, SEQUENTIAL, STUDIES, prediction_set
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.catalog.unknowns_search import REFERENCE_SEARCH
@@ -72,6 +72,26 @@ def _checked(design: SequentialDesign, options) -> SequentialDesign:
     return design
 
 
+def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...]) -> tuple[tuple[dict, ...], str]:
+    """The points of ``--uncertainty`` from ``--physics-from`` (a calibration's nroy.csv or ``registry``) and
+    their description; empty without it. A UsageError, before any work, when a study of ``names`` cannot
+    state it or the source is not a calibration's NROY set."""
+    if uncertainty is None:
+        return (), ""
+    if uncertainty < 1:
+        raise UsageError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {uncertainty}")
+    refused = [n for n in names if n not in PHYSICS]
+    if refused:
+        raise UsageError(f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}), got {refused[0]}")
+    source = None if physics_from == "registry" else Path(physics_from)
+    if source is not None and not source.is_file():
+        raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
+    try:
+        return prediction_set.physics_points(uncertainty, calibration=source)
+    except ValueError as e:
+        raise UsageError(f"physics-from: {e}") from None
+
+
 def study(
     name: Annotated[str, typer.Argument(help=f"One of: {', '.join(STUDIES)}.")],
     out: OutResumable,
@@ -98,6 +118,8 @@ def study(
     target_width_m: opt.TargetWidthM = None,
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
+    uncertainty: opt.Uncertainty = None,
+    physics_from: opt.PhysicsFrom = str(prediction_set.REFERENCE_NROY),
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
@@ -105,17 +127,21 @@ def study(
 
     With --target-width-m, --target-relative or --budget-frames (range-limit, webcam-vs-dslr)
     its ranges are the start of a sequential design that adds frames where the range limits
-    are undecided (design.json)."""
+    are undecided (design.json). With --uncertainty N (range-limit) it also runs at N points of
+    the unknowns and states each limit's noise + physics interval beside its noise one."""
     if name not in STUDIES:
         raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
     module = STUDIES[name]
     check_seeds("seeds", seeds)
+    physics, source = _physics(uncertainty, physics_from, (name,))
     options = module.default_options(quick).with_overrides(
         cameras=parse_list("cameras", cameras),
         beacons=parse_list("beacons", beacons),
         ranges_m=parse_list("ranges-m", ranges_m, float),
         currents_mA=parse_list("currents-ma", currents_ma, float),
         seeds=seeds,
+        physics=physics or None,
+        physics_source=source or None,
     )
     options.validate()
     settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
@@ -183,10 +209,14 @@ def main_job(
     target_width_m: opt.TargetWidthM = None,
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
+    uncertainty: opt.Uncertainty = None,
+    physics_from: opt.PhysicsFrom = str(prediction_set.REFERENCE_NROY),
     workers: opt.Workers = None,
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults; range-limit places
-    its frames by its sequential design (--target-width-m, --target-relative, --budget-frames)."""
+    its frames by its sequential design (--target-width-m, --target-relative, --budget-frames)
+    and, with --uncertainty N, states its far limits' noise + physics intervals too."""
+    physics, source = _physics(uncertainty, physics_from, ("range-limit",))
     settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
     designs = {
         n: _checked(SEQUENTIAL[n].default_design(True).with_overrides(**settings), SEQUENTIAL[n].default_options(True))
@@ -199,6 +229,8 @@ def main_job(
         for name in MAIN_JOB:
             module = STUDIES[name]
             options = module.default_options(True)
+            if name in PHYSICS and physics:
+                options = options.with_overrides(physics=physics, physics_source=source)
             options.validate()
             if name in designs:
                 module.run(prepare_out_dir(out / name), options, execution, design=designs[name])

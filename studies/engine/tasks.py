@@ -68,6 +68,8 @@ class StudyOptions:
     physics: tuple[dict, ...] = ()
     """Points of the unknowns (registry name → value) each condition is also run at (empty: the
     nominal run only)."""
+    physics_source: str = ""
+    """What the points are, in words (for reports)."""
 
     def validate(self) -> None:
         """Fail fast, before any work, with one line naming the bad option."""

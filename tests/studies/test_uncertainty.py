@@ -100,7 +100,12 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
     base = StudyOptions(cameras=("canon-t6-18mm",), ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0), seeds=3)
     design = sequential.SequentialDesign(target_relative=0.2, max_range_m=20.0)
     nominal = range_limit.run(tmp_path / "nominal", base, design=design)["max_range"][0]
-    rec = range_limit.run(tmp_path / "physics", base.with_overrides(physics=points), design=design)["max_range"][0]
+    with_points = base.with_overrides(physics=points, physics_source="16 planted points")
+    summary = range_limit.run(tmp_path / "physics", with_points, design=design)
+    rec = summary["max_range"][0]
+    assert summary["physics"] == {"points": 16, "source": "16 planted points"}
+    page = (tmp_path / "physics" / "report.html").read_text()
+    assert "far limit, noise + physics" in page and "each condition also ran at 16 planted points" in page
     assert {k: rec[k] for k in ("max_range_m", "low_m", "high_m", "frames")} == {
         k: nominal[k] for k in ("max_range_m", "low_m", "high_m", "frames")
     }  # the nominal run is the same frames with or without the points
@@ -112,3 +117,61 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
     assert "(88 %, 16 points)" in rec["far_interval_physics"]
     with pytest.raises(ValueError, match=r"physics\[0\]\.led_intensity_red: 99 is outside"):
         base.with_overrides(physics=({"led_intensity_red": 99},)).validate()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["study", "brightness-diffuser", "--uncertainty", "4"],
+         r"uncertainty: expected a study that states it \(range-limit\), got brightness-diffuser"),
+        (["study", "range-limit", "--uncertainty", "0"], r"uncertainty: expected an integer >= 1"),
+        (["study", "range-limit", "--uncertainty", "4", "--physics-from", "none.csv"],
+         r"physics-from: expected a calibration's nroy.csv or 'registry', none.csv is not a file"),
+        (["main-job", "--uncertainty", "-2"], r"uncertainty: expected an integer >= 1"),
+    ],
+)  # fmt: skip
+def test_the_command_line_refuses_bad_uncertainty_before_any_work(monkeypatch, tmp_path, args, message):
+    import re
+
+    from tests.helpers.cli import assert_one_line_error, invoke, patch_work
+
+    patch_work(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    code, _, err = invoke([*args, "--out", str(tmp_path / "o")])
+    assert re.search(message, assert_one_line_error(code, err))
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_command_line_gives_the_study_its_points(monkeypatch, tmp_path):
+    from studies.catalog import range_limit
+    from tests.helpers.cli import invoke
+
+    seen = {}
+    monkeypatch.setattr(range_limit, "run", lambda out, options, execution, design=None: seen.update(o=options))
+    monkeypatch.chdir(tmp_path)
+    code, _, err = invoke(["study", "range-limit", "--quick", "--out", "o", "--uncertainty", "3",
+                           "--physics-from", "registry"])  # fmt: skip
+    assert code == 0, err
+    assert len(seen["o"].physics) == 3 and "from their registry ranges" in seen["o"].physics_source
+
+
+def test_physics_points_take_what_the_calibration_covered_from_its_nroy_set(tmp_path):
+    import pandas as pd
+
+    from studies.catalog import calibration, prediction_set
+    from studies.engine.unknowns import sample
+
+    space = calibration.search_space(calibration.load_observations())
+    nroy = pd.DataFrame(sample(space, 2, seed=9))
+    nroy.to_csv(tmp_path / "nroy.csv", index=False)
+    points, which = prediction_set.physics_points(4, calibration=tmp_path / "nroy.csv")
+    assert len(points) == 4 and "from the calibration's NROY set (nroy.csv, 2 of its points, reused)" in which
+    rows = prediction_set.load(tmp_path / "nroy.csv").points
+    assert [r["led_intensity_red"] for r in rows] == pytest.approx(list(nroy.led_intensity_red))
+    for i, point in enumerate(points):  # the NROY points in turn, for every unknown both know
+        assert {k: point[k] for k in set(point) & set(space)} == {k: rows[i % 2][k] for k in set(point) & set(space)}
+    assert "led_drive" not in points[0] and not any("iterations" in k for k in points[0])  # a study's axes stay its own
+    alone, which = prediction_set.physics_points(4, calibration=None)
+    assert "from their registry ranges" in which and alone != points
+    with pytest.raises(ValueError, match=r"uncertainty: expected an integer >= 1"):
+        prediction_set.physics_points(0)
