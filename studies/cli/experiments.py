@@ -510,6 +510,52 @@ def calibrate_unknowns(
     )
 
 
+def sensitivity(
+    out: Annotated[
+        Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory (re-run to resume).")
+    ],
+    camera: opt.Camera = "logitech-c270",
+    beacon: opt.Beacon = "v2",
+    side: opt.Side = "red",
+    yaw_deg: Annotated[float, typer.Option("--yaw-deg", help="Beacon yaw, degrees (0-90).")] = 0.0,
+    led_current_ma: Annotated[float, typer.Option("--led-current-ma", help="LED drive current, mA.")] = 2.0,
+    points: Annotated[
+        int, typer.Option("--points", help="Points of the unknowns (direct runs the emulator is fitted to), >= 8.")
+    ] = 32,
+    physics_from: opt.PhysicsFrom = "registry",
+    quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid, two seeds per range.")] = False,
+    seed: opt.Seed = 0,
+    workers: opt.Workers = None,
+) -> None:
+    """Rank the unknowns by how much of a camera's far limit (and of P(correct) at 5 m) each explains:
+    Morris screening, then Sobol' indices, on an emulator of range-limit runs at points of the unknowns."""
+    from studies.catalog import prediction_set
+    from studies.catalog import sensitivity as analysis
+
+    if camera not in camera_names():
+        raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {camera!r}")
+    if points < 8:
+        raise UsageError(f"points: expected an integer >= 8 (an emulator needs several runs), got {points}")
+    if not 0 <= yaw_deg <= 90:
+        raise UsageError(f"yaw-deg: expected an angle in [0, 90], got {yaw_deg:g}")
+    source = None if physics_from == "registry" else Path(physics_from)
+    if source is not None and not source.is_file():
+        raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
+    setting = analysis.Setting(camera=camera, beacon=beacon, side=side, led_current_mA=led_current_ma, yaw_deg=yaw_deg)
+    try:
+        analysis.check(setting)
+        prediction_set.physics_points(points, seed=seed, calibration=source)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    run_on = execution(workers)
+    check_render_cache()
+    prepare_out_dir(out)
+    summary = analysis.run(out, setting, points=points, calibration=source, seed=seed, quick=quick, execution=run_on)
+    for a in summary["analyses"].values():
+        console.print(a["sentences"][0])
+    console.print(f"sensitivity: {summary['wall_s']:.0f} s; wrote {out}/report.html and sensitivity.json")
+
+
 def crop_vs_full(
     out: opt.Out,
     cameras: opt.Cameras = None,
@@ -582,6 +628,7 @@ COMMANDS = {
     "bench": bench,
     "unknowns-search": unknowns_search,
     "calibrate-unknowns": calibrate_unknowns,
+    "sensitivity": sensitivity,
     "colour-reach": colour_reach,
     "crop-vs-full": crop_vs_full,
     "tracker-pruning": tracker_pruning,

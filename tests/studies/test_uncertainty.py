@@ -65,33 +65,14 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
     """range-limit at points of a planted unknown (the red LEDs' intensity bin) on fake frames whose
     logistic fall-off moves with it: the nominal run keeps its own frames and interval, and the noise +
     physics interval spans the points' limits (their known truth) at the rate it states."""
-    import hashlib
-    import json
-
     from studies.catalog import range_limit
     from studies.engine import sequential
     from studies.engine.max_range import LN19
     from studies.engine.tasks import StudyOptions
     from studies.engine.unknowns import load_unknowns, sample
+    from tests.helpers.planted_frames import planted_rows, red_bin
 
-    def r50(task) -> float:  # the fall-off's midpoint, m: 3 m more per candela of the bin
-        cd = (task["scenario"].get("data") or {}).get("leds.red.luminous_intensity_cd", 5.1)
-        return 8.0 + 3.0 * (cd - 5.1)
-
-    def rows(tasks, out, execution, description=""):
-        made = []
-        for task in tasks:
-            sc = task["scenario"]
-            u = int.from_bytes(hashlib.sha256(json.dumps(task, sort_keys=True).encode()).digest()[:8], "little")
-            ok = u / 2**64 < 1 / (1 + math.exp((sc["range_m"] - r50(task)) / 0.4))
-            made.append({**sc, **(task.get("tags") or {}), "nominal_range_m": task["nominal"]["range_m"],
-                         "nominal_yaw_deg": task["nominal"]["yaw_deg"], "seed": task["seed"], "tracker": "best",
-                         "estimator": "best", "detected": ok, "side_correct": ok, "numbering_correct": ok,
-                         "range_err_m": 0.01 if ok else math.nan, "yaw_err_deg": 0.1 if ok else math.nan,
-                         "failure": "" if ok else "no-blobs", "reason": ""})  # fmt: skip
-        return made
-
-    monkeypatch.setattr(sequential, "run_frames", rows)
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 8.0 + 3.0 * (red_bin(t) - 5.1)))
     registry = load_unknowns()
     points = tuple(
         {"led_intensity_red": p["led_intensity_red"]}
