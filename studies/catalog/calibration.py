@@ -42,6 +42,7 @@ from studies.engine.calibration import (
     InputSpace,
     Observation,
     Settings,
+    closest_points,
     from_json,
     history_match,
     nroy_sample,
@@ -75,6 +76,9 @@ OBSERVATIONS_FILE = Path(__file__).resolve().parents[1] / "data" / "observations
 RENDER = {"spp": 4, "oversampling": 2, "crop": "target", "near_field_spp": 1024}
 """Render settings of the calibration's frames (close range: the target alone is in view)."""
 QUICK_RENDER = {**RENDER, "near_field_spp": 256}
+CLOSEST = 64
+"""Reference points ``closest.csv`` holds: the least implausible, whether or not any survives (a
+prediction made from them when nothing does says so)."""
 NROY_SAMPLE = 256
 """Points of the NROY set ``nroy.csv`` holds (drawn from it: the reference sample's few survivors of a
 small set are too few to predict from)."""
@@ -420,7 +424,8 @@ def run(
 
 
 def write_outputs(result: HistoryMatch, observed: Sequence[Observed], out: Path) -> None:
-    """``nroy.csv`` (:data:`NROY_SAMPLE` points not ruled out, :func:`nroy_sample`), the figures,
+    """``nroy.csv`` (:data:`NROY_SAMPLE` points not ruled out, :func:`nroy_sample`), ``closest.csv``
+    (the :data:`CLOSEST` least implausible reference points, with their implausibility), the figures,
     ``summary.json`` and ``report.html`` of a match (also of one read back from its ``history.json``
     while it is still running: they then say "running")."""
     out = Path(out)
@@ -428,6 +433,10 @@ def write_outputs(result: HistoryMatch, observed: Sequence[Observed], out: Path)
     values = result.space.values(sample[0]) if len(sample[0]) else []
     nroy = pd.DataFrame(values) if values else pd.DataFrame(columns=list(result.space.names))
     atomic_write_bytes(out / "nroy.csv", nroy.to_csv(index=False, float_format="%.6g").encode())
+    near, implausibility = closest_points(result, CLOSEST) if result.waves else (np.empty((0, 0)), np.empty(0))
+    closest = pd.DataFrame(result.space.values(near) if len(near) else [], columns=list(result.space.names))
+    closest["implausibility"] = implausibility
+    atomic_write_bytes(out / "closest.csv", closest.to_csv(index=False, float_format="%.6g").encode())
     write_figures(result, out)
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary(result, observed, sample), indent=2).encode())
     write_report(result, observed, out, sample)
@@ -586,10 +595,18 @@ def write_report(
         )
     else:
         alone = [d.observation for d in result.discrepancy if d.rules_out_alone]
+        _, worst = closest_points(result, DESCRIBED) if result.waves else (None, np.array([]))
         lead.append(
             "Nothing survives at the stated discrepancies"
             + (f": {', '.join(alone)} each rule out every point alone." if alone else ".")
             + " The discrepancy table says how much each observation would need."
+            + (
+                f" The {len(worst)} least implausible reference points (closest.csv; their implausibility "
+                f"{worst.min():.2f}-{worst.max():.2f} against the cut-off {result.settings.cutoff:g}) are what a "
+                "prediction can be made from, saying that none of them is consistent."
+                if len(worst)
+                else ""
+            )
         )
     rep.lead(lead)
     for name, caption in (
@@ -670,7 +687,8 @@ def write_report(
         )
     rep.text(
         "Records: history.json (every wave, its emulators and runs), nroy.csv (the points not ruled out), "
-        "summary.json; the frames in tasks/.",
+        "closest.csv (the least implausible reference points, with their implausibility), summary.json; the "
+        "frames in tasks/.",
         note=True,
     )
     return rep.write(out / "report.html")

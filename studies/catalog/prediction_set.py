@@ -3,7 +3,9 @@
 ``validate`` (and any study that predicts "from what the calibration left") reads one file:
 
 * a history match's ``nroy.csv`` (``beacon-sim calibrate-unknowns``, :mod:`studies.catalog.calibration`):
-  the points not ruled out, one column per calibrated unknown. The primary test's side is the
+  the points not ruled out, one column per calibrated unknown; or its ``closest.csv`` (the least
+  implausible reference points, with an ``implausibility`` column: taken lowest first, and the set's
+  description says none of them is consistent). The primary test's side is the
   point's ``primary_test_side``; V1's sides have their own dimmer settings; of V2's only the primary
   side's was observed (``led_drive_v2_primary``), so V2's other sides are assumed to share it (the
   study set each side with a potentiometer and says nothing of the others);
@@ -33,12 +35,32 @@ import pandas as pd
 from studies.catalog import calibration, unknowns_search
 from studies.engine.unknowns import Unknown, apply, sample
 
-__all__ = ["CALIBRATION", "REFERENCE_NROY", "SEARCH", "PredictionSet", "load", "physics_points"]
+__all__ = [
+    "CALIBRATION",
+    "REFERENCE_CLOSEST",
+    "REFERENCE_NROY",
+    "SEARCH",
+    "PredictionSet",
+    "load",
+    "physics_points",
+    "reference_set",
+]
 
 CALIBRATION = "calibration"
 SEARCH = "unknowns-search"
 REFERENCE_NROY = Path(__file__).resolve().parents[2] / "results" / "calibration" / "nroy.csv"
 """The NROY set of the project's own history match (``beacon-sim calibrate-unknowns``, ``results/calibration``)."""
+REFERENCE_CLOSEST = REFERENCE_NROY.with_name("closest.csv")
+"""Its least implausible reference points (what to predict from, said so, when the NROY set is empty)."""
+
+
+def reference_set() -> Path:
+    """The project's own calibration's set to predict from: its NROY set, or, when that is empty, its
+    least implausible points."""
+    empty = not REFERENCE_NROY.is_file() or pd.read_csv(REFERENCE_NROY).empty
+    return REFERENCE_CLOSEST if empty and REFERENCE_CLOSEST.is_file() else REFERENCE_NROY
+
+
 STUDY_AXES = ("led_drive",)
 """Unknowns a study sweeps itself (the LED drive is a grid axis), so no point of the physics sets them."""
 
@@ -102,17 +124,28 @@ def load(path: str | Path, limit: int | None = None) -> PredictionSet:
             f"missing column {missing[0]!r}"
         )
     table = pd.read_csv(path)
+    closest = "implausibility" in header
     if table.empty:
-        raise ValueError(f"{path}: the calibration's NROY set is empty (it ruled out every point; see its report)")
+        raise ValueError(
+            f"{path}: the calibration's NROY set is empty (it ruled out every point; see its report; closest.csv "
+            "beside it holds the least implausible points)"
+        )
     rows = table[list(space)].to_dict("records")
     n = len(rows)
     if limit is not None and n > limit:
-        rows = [rows[i] for i in np.linspace(0, n - 1, limit).round().astype(int)]
+        picks = np.arange(limit) if closest else np.linspace(0, n - 1, limit).round().astype(int)
+        rows, table = [rows[i] for i in picks], table.iloc[picks]
     points = tuple({k: _plain(v, space[k]) for k, v in r.items()} for r in rows)
-    which = (
-        f"{len(points)} of the {n} points the calibration did not rule out (NROY, {path.name}); V2's sides other "
-        "than the primary test's share its dimmer setting (not observed)"
-    )
+    shared = "V2's sides other than the primary test's share its dimmer setting (not observed)"
+    if closest:
+        worst = table["implausibility"]
+        which = (
+            f"the {len(points)} least implausible of the calibration's reference points ({path.name}): NONE is "
+            f"consistent with what the study saw (implausibility {worst.min():.2f}-{worst.max():.2f}, above the "
+            f"cut-off 3), so these predictions are of the closest the model came; {shared}"
+        )
+    else:
+        which = f"{len(points)} of the {n} points the calibration did not rule out (NROY, {path.name}); {shared}"
     return PredictionSet(points, which, CALIBRATION, space)
 
 

@@ -88,8 +88,9 @@ PhysicsFrom = Annotated[
     str,
     typer.Option(
         "--physics-from",
-        help="Where --uncertainty's points come from: a calibration's nroy.csv (the unknowns it covered; the others "
-        "from their ranges) or 'registry' (every unknown from its range).",
+        help="Where --uncertainty's points come from: 'calibration' (the project's: results/calibration/nroy.csv, "
+        "or its closest.csv when the NROY set is empty), a calibration's nroy.csv or closest.csv (the unknowns it "
+        "covered; the others from their ranges) or 'registry' (every unknown from its range).",
     ),
 ]
 Cameras = Annotated[

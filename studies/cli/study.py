@@ -12,7 +12,6 @@ import typer
 from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, PHYSICS, SEQUENTIAL, STUDIES, prediction_set
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
-from studies.catalog.unknowns_search import REFERENCE_SEARCH
 from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list
 from studies.cli.out_folder import prepare_out_dir
@@ -83,7 +82,7 @@ def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...])
     refused = [n for n in names if n not in PHYSICS]
     if refused:
         raise UsageError(f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}), got {refused[0]}")
-    source = None if physics_from == "registry" else Path(physics_from)
+    source = {"registry": None, "calibration": prediction_set.reference_set()}.get(physics_from, Path(physics_from))
     if source is not None and not source.is_file():
         raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
     try:
@@ -119,7 +118,7 @@ def study(
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
-    physics_from: opt.PhysicsFrom = str(prediction_set.REFERENCE_NROY),
+    physics_from: opt.PhysicsFrom = "calibration",
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
@@ -162,14 +161,14 @@ def validate(
     quick: Annotated[bool, typer.Option("--quick", help="Fewer conditions and seeds.")] = False,
     seeds: opt.Seeds = None,
     calibration: Annotated[
-        Path,
+        Path | None,
         typer.Option(
             "--calibration",
-            help="nroy.csv of calibrate-unknowns (its NROY set) or samples.csv of an unknowns search: predict "
-            "from that set.",
-            show_default="results/unknowns-search/samples.csv",
+            help="nroy.csv of calibrate-unknowns (its NROY set; or its closest.csv, the least implausible points) "
+            "or samples.csv of an unknowns search: predict from that set.",
+            show_default="results/calibration/nroy.csv, or its closest.csv when the NROY set is empty",
         ),
-    ] = REFERENCE_SEARCH,
+    ] = None,
     nominal: Annotated[bool, typer.Option("--nominal", help="Ignore --calibration: the unknowns at nominal.")] = False,
     points: Annotated[
         int | None,
@@ -182,6 +181,7 @@ def validate(
 ) -> None:
     """Predict the source study's tests with its own detector and settings (validation.csv, report.html)."""
     check_seeds("seeds", seeds)
+    calibration = prediction_set.reference_set() if calibration is None else calibration
     if points is not None and points < 1:
         raise UsageError(f"points: expected an integer >= 1, got {points}")
     if not nominal and not calibration.is_file():
@@ -210,7 +210,7 @@ def main_job(
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
-    physics_from: opt.PhysicsFrom = str(prediction_set.REFERENCE_NROY),
+    physics_from: opt.PhysicsFrom = "calibration",
     workers: opt.Workers = None,
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults; range-limit places

@@ -25,6 +25,7 @@ from studies.engine.calibration import (
     InputSpace,
     Observation,
     Settings,
+    closest_points,
     combine,
     diagnose,
     fit_emulator,
@@ -198,6 +199,14 @@ def test_nothing_fits_names_the_observation_and_its_discrepancy():
     assert needs["f1"].alone_sd == 0.0 and needs["f2"].alone_sd == 0.0
     # jointly (at the best point) f3 needs at least what it needs alone
     assert needs["f3"].joint_sd >= needs["f3"].alone_sd
+    # the closest points: the least implausible first, every one above the cut-off, near f3's best corner
+    # (x3 = 0.1, x1 = 1: f3 = e^0.5 + 0.3 is as near 3 as the toy gets)
+    near, worst = closest_points(result, 8)
+    assert near.shape == (8, 3) and (np.diff(worst) >= 0).all() and (worst > 3.0).all()
+    x1, _, x3 = unit_to_natural(near)
+    assert (x3 < 0.5).all() and (x1 > 0.5).all()
+    with pytest.raises(ValueError, match=r"n: expected an integer >= 1"):
+        closest_points(result, 0)
 
 
 def test_same_seed_same_json_bytes_and_round_trip():

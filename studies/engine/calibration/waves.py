@@ -50,6 +50,7 @@ __all__ = [
     "HistoryMatch",
     "Settings",
     "Wave",
+    "closest_points",
     "discrepancy_needs",
     "from_json",
     "history_match",
@@ -344,6 +345,23 @@ def reference_implausibility(result: HistoryMatch) -> tuple[np.ndarray, np.ndarr
         )
         worst = np.maximum(worst, c)
     return q, worst
+
+
+def closest_points(result: HistoryMatch, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n`` reference points with the lowest implausibility over the waves
+    (:func:`reference_implausibility`), lowest first: what a prediction can be made from, *said so*,
+    when nothing survives the cut-off (each point's implausibility is returned beside it).
+
+    Returns
+    -------
+    points, implausibility
+        (k ≤ n, d) unit points and their (k,) implausibility.
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n: expected an integer >= 1, got {n!r}")
+    q, worst = reference_implausibility(result)
+    order = np.argsort(worst, kind="stable")[:n]
+    return q[order], worst[order]
 
 
 def discrepancy_needs(
