@@ -169,9 +169,9 @@ class ISPModel:
     white_balance: str  # "daylight" or "auto"
     awb_max_gain_ratio: float
     camera_to_xyz: NDArray[np.float64]  # 3×3, white-balanced camera RGB -> XYZ (D65 white)
-    tone_curve: str  # "srgb" or "picture-standard"
-    jpeg_quality: int
-    chroma_subsampling: str
+    tone_curve: str  # "srgb", "picture-standard" or "linear" (gamma 1)
+    jpeg_quality: int | None  # None when the camera saves no JPEG (output "bgr8")
+    chroma_subsampling: str | None
     # stages after white balance, from the body's [isp.processing_options.<processing>] table; defaults = "legacy"
     processing: str = "legacy"
     highlight: str = "clip"  # "clip" (dcraw -H 0), "unclip" (-H 1) or "blend" (-H 2)
@@ -188,8 +188,13 @@ class ISPModel:
     # set too high). Not a body setting: an unknown (studies/data/unknowns.toml)
     raw_saturation_ratio: float = 1.0
     # where camera_to_xyz comes from: "from-ssf" (fitted to the sensor's sensitivities, refitted when
-    # they are swapped: with_ssf) or "published" (the body's own matrix, e.g. a DNG ColorMatrix: kept)
+    # they are swapped: with_ssf) or "published" (the body's own matrix, e.g. a DNG ColorMatrix: kept);
+    # "none": no colour correction, the output is white-balanced camera RGB (camera_to_xyz unused)
     colour_matrix: str = "from-ssf"
+    # what the camera hands over (OUTPUTS): "jpeg" (a JPEG file at jpeg_quality, chroma_subsampling)
+    # or "bgr8" (the uncompressed 8-bit frame of a machine-vision pixel format BGR8, kept exactly:
+    # a lossless PNG when written to a file)
+    output: str = "jpeg"
 
     def white_level_DN(self, sensor: SensorModel) -> float:
         """The raw level this ISP maps to white, DN: the sensor's clip level over
@@ -306,8 +311,13 @@ CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 HIGHLIGHT_MODES = ("clip", "unclip", "blend")
 """ISP highlight handling: dcraw ``-H 0``, ``-H 1``, ``-H 2`` (see :mod:`camera_models.isp`)."""
 NOISE_REDUCTION_METHODS = ("none", "nlmeans")
-TONE_CURVES = ("srgb", "picture-standard")
+TONE_CURVES = ("srgb", "picture-standard", "linear")
+"""ISP tone curves: sRGB encoding, Canon's Picture Style Standard, or none (``linear``: gamma 1, the
+8-bit code proportional to the linear signal, as a machine-vision camera with its gamma/LUT off)."""
 CHROMA_SUBSAMPLINGS = ("4:4:4", "4:2:2", "4:2:0")
+OUTPUTS = ("jpeg", "bgr8")
+"""``[isp] output``: a JPEG file, or the uncompressed 8-bit BGR frame a machine-vision camera
+delivers in its BGR8 pixel format (no compression; saved as a lossless PNG)."""
 DISTORTION_TERMS = {"ptlens": ("a", "b", "c"), "poly3": ("k1",), "equidistant": ()}
 """Coefficients of each lens distortion model (lensfun conventions; see :mod:`camera_models.optics`)."""
 
@@ -475,8 +485,10 @@ def _sensor(s: Fields, source: HardwareFile) -> SensorModel:
     )
 
 
-COLOUR_MATRICES = ("from-ssf",)
-"""``[isp] colour_matrix`` without ``xyz_to_camera``: the matrix fitted to the sensitivities."""
+COLOUR_MATRICES = ("from-ssf", "none")
+"""``[isp] colour_matrix`` without ``xyz_to_camera``: the matrix fitted to the sensitivities, or
+``none`` (no colour correction: the output is the white-balanced camera RGB, as a machine-vision
+camera with its colour-correction matrix off delivers it)."""
 
 NR_KEYS = ("nr_analog_gain", "nr_luma_h", "nr_chroma_h")
 """Noise-reduction strengths of a processing option: analog gains and the filter's h at each."""
@@ -492,12 +504,12 @@ def _isp(i: Fields, sensor: SensorModel) -> ISPModel:
                 f"{i.file}: {i.prefix}colour_matrix: expected nothing beside xyz_to_camera (which sets the matrix), "
                 f"got {i.raw('colour_matrix')!r}"
             )
-        xyz_to_camera = _matrix(rows)
+        xyz_to_camera, matrix = _matrix(rows), "published"
         d65 = np.array([0.95047, 1.0, 1.08883])  # CIE D65 white, Y = 1 (CIE 15:2004)
         neutral = xyz_to_camera @ d65
         camera_to_xyz = np.linalg.inv(xyz_to_camera) @ np.diag(neutral / neutral[1])
     else:
-        i.text("colour_matrix", choices=COLOUR_MATRICES, default="from-ssf")
+        matrix = i.text("colour_matrix", choices=COLOUR_MATRICES, default="from-ssf")
         camera_to_xyz = camera_to_xyz_from_ssf(sensor.qe_rgb)
     profiles = i.table("processing_options", default={})
     processing = i.text("processing", choices=tuple(profiles.values) or ("legacy",), default="legacy")
@@ -508,15 +520,28 @@ def _isp(i: Fields, sensor: SensorModel) -> ISPModel:
     # the noise-reduction strengths belong to the body: kept whichever option is chosen, so a run
     # can switch noise reduction on by itself (camera override "isp.noise_reduction")
     nr = next((o["nr"] for o in (chosen, *options.values()) if o["nr"]["nr_analog_gain"]), chosen["nr"])
+    output = i.text("output", choices=OUTPUTS, default="jpeg")
+    if output == "jpeg":
+        jpeg_quality = i.number("jpeg_quality", integer=True, minimum=1, maximum=100)
+        chroma = i.text("chroma_subsampling", choices=CHROMA_SUBSAMPLINGS)
+    else:  # no JPEG: its settings would be read by nothing
+        for key in ("jpeg_quality", "chroma_subsampling"):
+            if i.has(key):
+                raise DataFileError(
+                    f"{i.file}: {i.prefix}{key}: expected nothing (output = {output!r} saves no JPEG), "
+                    f"got {i.raw(key)!r}"
+                )
+        jpeg_quality = chroma = None
     return ISPModel(
         demosaic=i.text("demosaic", choices=("bilinear",)),
         white_balance=i.text("white_balance", choices=("daylight", "auto")),
         awb_max_gain_ratio=i.number("awb_max_gain_ratio", minimum=1.0, default=1.0),
         camera_to_xyz=camera_to_xyz,
-        colour_matrix="published" if i.has("xyz_to_camera") else "from-ssf",
+        colour_matrix=matrix,
         tone_curve=chosen["tone_curve"],
-        jpeg_quality=i.number("jpeg_quality", integer=True, minimum=1, maximum=100),
-        chroma_subsampling=i.text("chroma_subsampling", choices=CHROMA_SUBSAMPLINGS),
+        jpeg_quality=jpeg_quality,
+        chroma_subsampling=chroma,
+        output=output,
         processing=processing,
         highlight=chosen["highlight"],
         noise_reduction=chosen["noise_reduction"],
@@ -592,7 +617,7 @@ def with_ssf(camera: Camera, name: object) -> Camera:
     qe = load_ssf_qe(SSF_DIR / str(name), float(camera.sensor.qe_rgb.max()), energy_response=True)
     sensor = replace(camera.sensor, qe_rgb=qe)
     isp = camera.isp
-    if isp.colour_matrix == "from-ssf":
+    if isp.colour_matrix != "published":  # "none" keeps the fitted matrix current too (it is unused)
         isp = replace(isp, camera_to_xyz=camera_to_xyz_from_ssf(qe))
     return replace(camera, sensor=sensor, isp=isp)
 

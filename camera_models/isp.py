@@ -1,10 +1,18 @@
-"""In-camera image processing: raw mosaic → the 8-bit JPEG the camera saves.
+"""In-camera image processing: raw mosaic → the 8-bit image the camera saves (a JPEG, or an
+uncompressed frame).
 
 black level → normalise to the white level → demosaic (OpenCV, bilinear) → white
 balance (daylight gains from the sensor's own sensitivities under D65, or grey-world
 auto white balance limited around them) → highlight handling → camera RGB → CIE XYZ
 (D65) → linear sRGB (colour-science) → tone curve → 8 bit → noise reduction →
 sharpening → JPEG at the camera's quality and chroma subsampling (OpenCV/libjpeg).
+
+A machine-vision camera hands over its frame in an 8-bit pixel format instead of a JPEG:
+``[isp] output = "bgr8"`` keeps the 8-bit BGR frame exactly (:attr:`ProcessedImage.encoded` is
+then a lossless PNG of it); with ``colour_matrix = "none"`` (no colour correction: camera RGB
+after white balance) and the ``linear`` tone curve (gamma 1: code = round(255 · linear)) the
+frame is the linear sensor signal above black, scaled to 8 bits, as such a camera's BGR8 format
+delivers it with its colour-correction matrix and gamma/LUT off.
 
 The stages after white balance are options of :class:`camera_models.camera.ISPModel`,
 chosen per body by ``[isp] processing`` (a ``[isp.processing_options.<name>]`` table):
@@ -29,7 +37,8 @@ noise reduction
     ISOs and stronger at higher ISOs, reducing both chroma and luminance noise (DPReview,
     Canon EOS-1D Mark IV review p. 18; Imaging Resource, Canon 60D / T4i high-ISO NR pages).
 tone curve
-    ``srgb`` (IEC 61966-2-1, colour-science) or ``picture-standard``: Canon Picture Style
+    ``srgb`` (IEC 61966-2-1, colour-science), ``linear`` (none: the code is proportional to
+    the linear value) or ``picture-standard``: Canon Picture Style
     "Standard" uses a contrastier tone curve than the flat styles (DPReview, EOS 400D /
     50D reviews: "Type 1 (more contrast)"); Canon does not publish it, so it is modelled
     as an S-curve on the sRGB-encoded value, y = (1 − c)·v + c·(3v² − 2v³), 0 ≤ c ≤ 1.
@@ -51,7 +60,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from camera_models.camera import HIGHLIGHT_MODES, NOISE_REDUCTION_METHODS, TONE_CURVES, Camera
+from camera_models.camera import HIGHLIGHT_MODES, NOISE_REDUCTION_METHODS, OUTPUTS, TONE_CURVES, Camera
 from camera_models.sensor import cfa_channels
 from scenes import spectra
 
@@ -107,7 +116,13 @@ def auto_white_balance_gains(rgb_means: NDArray[np.float64], camera: Camera) -> 
 
 
 def camera_to_srgb_matrix(camera: Camera) -> NDArray[np.float64]:
-    """3×3 matrix from white-balanced camera RGB to linear sRGB (D65); white maps to white."""
+    """3×3 matrix from white-balanced camera RGB to linear sRGB (D65); white maps to white.
+
+    The identity for a camera without colour correction (``isp.colour_matrix = "none"``): its
+    output is the white-balanced camera RGB itself.
+    """
+    if camera.isp.colour_matrix == "none":
+        return np.eye(3)
     xyz_from_balanced = camera.isp.camera_to_xyz
     white = xyz_from_balanced @ np.ones(3)
     d65 = colour.xy_to_XYZ(colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"])
@@ -117,6 +132,10 @@ def camera_to_srgb_matrix(camera: Camera) -> NDArray[np.float64]:
     return m / (m @ np.ones(3))[:, None]
 
 
+FILE_SUFFIXES = {"jpeg": ".jpg", "png": ".png"}
+"""File name suffix of each format the saved image can take (:attr:`ProcessedImage.file_format`)."""
+
+
 @dataclass(frozen=True)
 class ProcessedImage:
     """What the ISP makes of a raw frame.
@@ -124,21 +143,37 @@ class ProcessedImage:
     Attributes
     ----------
     bgr8
-        (rows, columns, 3) uint8 sRGB, BGR order (OpenCV's, which the JPEG encoder takes).
-    jpeg
-        The JPEG file's bytes.
+        (rows, columns, 3) uint8 image (sRGB, or what the camera's tone curve and colour
+        matrix make), BGR order (OpenCV's, which the encoders take).
+    encoded
+        The saved file's bytes: a JPEG, or (``isp.output = "bgr8"``) a lossless PNG of ``bgr8``.
     wb_gains
         White-balance gains used (R, G, B).
+    file_format
+        ``jpeg`` or ``png`` (:data:`FILE_SUFFIXES`).
     """
 
     bgr8: NDArray[np.uint8]
-    jpeg: bytes
+    encoded: bytes
     wb_gains: NDArray[np.float64]
+    file_format: str = "jpeg"
 
     @property
     def rgb8(self) -> NDArray[np.uint8]:
         """The same image in RGB order (a view)."""
         return self.bgr8[..., ::-1]
+
+    @property
+    def suffix(self) -> str:
+        """The saved file's name suffix (``.jpg``, ``.png``)."""
+        return FILE_SUFFIXES[self.file_format]
+
+    @property
+    def jpeg(self) -> bytes:
+        """The saved JPEG's bytes; ValueError when the camera saves none (see :attr:`encoded`)."""
+        if self.file_format != "jpeg":
+            raise ValueError(f"image: this camera saves no JPEG (a {self.file_format} file); use encoded")
+        return self.encoded
 
 
 NLMEANS_TEMPLATE_PX = 7
@@ -172,6 +207,10 @@ def check_isp_options(camera: Camera) -> None:
         raise ValueError("isp.sharpening_amount: expected amount >= 0 and sigma > 0")
     if not 0.5 < isp.raw_saturation_ratio <= 1.0:
         raise ValueError(f"isp.raw_saturation_ratio: expected 0.5 < ratio <= 1, got {isp.raw_saturation_ratio!r}")
+    if isp.output not in OUTPUTS:
+        raise ValueError(f"isp.output: expected one of {', '.join(OUTPUTS)}, got {isp.output!r}")
+    if isp.output == "jpeg" and isp.jpeg_quality is None:  # a bgr8 body switched to JPEG by an override
+        raise ValueError("isp.jpeg_quality: expected a quality 1-100 for a JPEG output, got None")
 
 
 def process(
@@ -228,7 +267,17 @@ def process(
         bgr8 = _reduce_noise_bgr(bgr8, luma_h, chroma_h)
     if isp.sharpening_amount > 0.0:
         bgr8 = _unsharp_mask_bgr(bgr8, isp.sharpening_amount, isp.sharpening_sigma_px)
-    return ProcessedImage(bgr8, encode_jpeg_bgr(bgr8, camera), gains)
+    return saved_image(bgr8, camera, gains)
+
+
+def saved_image(bgr8: NDArray[np.uint8], camera: Camera, gains: NDArray[np.float64]) -> ProcessedImage:
+    """The :class:`ProcessedImage` of an 8-bit BGR frame: encoded as the camera saves it, a JPEG
+    (``isp.output = "jpeg"``) or, for an uncompressed output (``bgr8``), a lossless PNG."""
+    if camera.isp.output == "jpeg":
+        return ProcessedImage(bgr8, encode_jpeg_bgr(bgr8, camera), gains, "jpeg")
+    if camera.isp.output == "bgr8":
+        return ProcessedImage(bgr8, encode_png_bgr(bgr8), gains, "png")
+    raise ValueError(f"isp.output: expected one of {', '.join(OUTPUTS)}, got {camera.isp.output!r}")
 
 
 def white_balance_gains(raw: NDArray[np.uint16], camera: Camera, x0: int = 0, y0: int = 0) -> NDArray[np.float64]:
@@ -339,10 +388,13 @@ def blend_highlights(rgb: NDArray[np.float32], clip: float = 1.0) -> NDArray[np.
 def tone_curve(linear: NDArray[np.float64], name: str = "srgb", contrast: float = 0.0) -> NDArray[np.float64]:
     """Encoded value in [0, 1] of linear values (clipped to [0, 1]) under the named tone curve.
 
-    ``srgb``: the sRGB encoding (IEC 61966-2-1, colour-science). ``picture-standard``:
+    ``srgb``: the sRGB encoding (IEC 61966-2-1, colour-science). ``linear``: none (gamma 1, the
+    clipped linear value itself). ``picture-standard``:
     y = (1 − c)·v + c·(3v² − 2v³) with v the sRGB value and c = ``contrast`` in [0, 1]:
     0 → 0, 1 → 1, monotonic, mid-tone slope 1 + c/2, shadows and highlights compressed.
     """
+    if name == "linear":
+        return np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
     v = np.asarray(colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB"), dtype=np.float64)
     if name == "srgb":
         return v
@@ -434,6 +486,19 @@ def srgb_encode_8bit(linear: NDArray[np.float64]) -> NDArray[np.uint8]:
     out = base[idx]
     out += (step32 if x.dtype == np.float32 else step)[idx] <= x
     return out
+
+
+PNG_COMPRESSION = 1
+"""zlib level of the lossless PNG an uncompressed output is saved as (OpenCV ``IMWRITE_PNG_COMPRESSION``,
+0-9): the fastest that compresses at all; the pixels are the same at every level."""
+
+
+def encode_png_bgr(bgr8: NDArray[np.uint8]) -> bytes:
+    """Lossless PNG bytes of an 8-bit BGR image (OpenCV's order): what an uncompressed output saves."""
+    ok, buf = cv2.imencode(".png", bgr8, [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    if not ok:
+        raise RuntimeError("png: OpenCV could not encode the image")
+    return buf.tobytes()
 
 
 def encode_jpeg(rgb8: NDArray[np.uint8], camera: Camera) -> bytes:

@@ -15,7 +15,7 @@ from camera_models.isp import (
     camera_to_srgb_matrix,
     demosaic,
     encode_8bit,
-    encode_jpeg,
+    saved_image,
     white_balance_gains,
 )
 
@@ -48,6 +48,4 @@ def reference_process(raw: np.ndarray, camera, x0: int = 0, y0: int = 0) -> Proc
     if camera.isp.noise_reduction != "none" or camera.isp.sharpening_amount > 0.0:
         raise ValueError("isp: the reference path has no noise reduction or sharpening; use process()")
     rgb8 = reference_rgb8(raw, camera, x0, y0)
-    return ProcessedImage(
-        np.ascontiguousarray(rgb8[..., ::-1]), encode_jpeg(rgb8, camera), white_balance_gains(raw, camera, x0, y0)
-    )
+    return saved_image(np.ascontiguousarray(rgb8[..., ::-1]), camera, white_balance_gains(raw, camera, x0, y0))

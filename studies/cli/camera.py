@@ -121,7 +121,8 @@ def capture(
     ] = None,
     no_cache: opt.NoCache = False,
 ) -> None:
-    """Simulate what the camera saves: JPEG, raw mosaic (16-bit PNG), full-frame preview and capture.json."""
+    """Simulate what the camera saves: its image (JPEG, or PNG for an uncompressed output), raw mosaic
+    (16-bit PNG), full-frame preview and capture.json."""
     camera, seed = scenario.camera, scenario.render.seed
     cam = load_camera(camera)
     if f_number is not None:
@@ -146,7 +147,8 @@ def capture(
         background = render_background(scenario, cache)
     with console.status(f"capturing with {camera} ..."):
         cap = run_capture(radiance, cam, seed, background=background, exposure=exposure, f_number=f_number)
-    atomic_write_bytes(out / "image.jpg", cap.image.jpeg)
+    image_file = f"image{cap.image.suffix}"  # image.jpg, or image.png for an uncompressed output (isp.output)
+    atomic_write_bytes(out / image_file, cap.image.encoded)
     _ok, raw_png = cv2.imencode(".png", cap.raw)
     atomic_write_bytes(out / "raw.png", raw_png.tobytes())
     h, w = cap.image.rgb8.shape[:2]
@@ -154,7 +156,7 @@ def capture(
     _ok, preview = cv2.imencode(".png", np.ascontiguousarray(cap.image.rgb8[::step, ::step, ::-1]))
     atomic_write_bytes(out / "preview.png", preview.tobytes())
     markers = marker_core_saturation(cap, cam, scenario)
-    bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    bgr = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     seen = run_detect(bgr, Intrinsics.from_geometry(camera_geometry(camera)), beacon=scenario.beacon)
     warnings = capture_warnings(markers, scenario.side, seen.side if seen.markers else None)
     meta = {
@@ -176,14 +178,18 @@ def capture(
             "y0": cap.y0,
         },
         "white_balance_gains": [float(g) for g in cap.image.wb_gains],
-        "jpeg": {"quality": cam.isp.jpeg_quality, "chroma_subsampling": cam.isp.chroma_subsampling},
+        "jpeg": (
+            {"quality": cam.isp.jpeg_quality, "chroma_subsampling": cam.isp.chroma_subsampling}
+            if cam.isp.output == "jpeg"
+            else None  # the camera saves an uncompressed frame (isp.output), a lossless PNG
+        ),
         "pixel_grid": radiance.grid.to_dict(),
         "seconds": round(time.perf_counter() - t0, 3),
-        "files": {"image": "image.jpg", "raw": "raw.png", "preview": "preview.png"},
+        "files": {"image": image_file, "raw": "raw.png", "preview": "preview.png"},
     }
     atomic_write_bytes(out / "capture.json", strict_json.dumps(meta, indent=2).encode())
     console.print(
-        f"wrote {out}/ (image.jpg, raw.png, preview.png, capture.json): exposure {cap.exposure.exposure_s:.4g} s, "
+        f"wrote {out}/ ({image_file}, raw.png, preview.png, capture.json): exposure {cap.exposure.exposure_s:.4g} s, "
         f"gain x{cap.exposure.analog_gain:.3g}, {100 * cap.saturated_fraction:.3f} % of pixels clipped"
     )
     for line in warnings:

@@ -38,6 +38,7 @@ from studies.cli.common import (
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine import colour_reach as reach
 from studies.engine import strict_json
+from studies.engine.tasks import STUDY_CAMERAS
 from studies.experiments import bench as b
 from studies.experiments import crop_vs_full as cvf
 from studies.experiments import diffuser_mosaic as mosaic
@@ -165,7 +166,7 @@ def colour_reach(
     (per camera and side: whether any setting reaches the side's own box, and which) and
     trajectories.png.
     """
-    names = _cameras(cameras, camera_names())
+    names = _cameras(cameras, STUDY_CAMERAS)
     prepare_out_dir(out)
     cameras = {n: load_camera(n) for n in names}
     with console.status("colour curves of every camera, LED and setting ..."):
@@ -573,7 +574,7 @@ def crop_vs_full(
     tracker: blobs, success, range error, time per path), crop_vs_full_summary.csv and
     crop_vs_full.json (with the cost per frame of each path).
     """
-    names = _cameras(cameras, camera_names())
+    names = _cameras(cameras, STUDY_CAMERAS)
     ranges = parse_list("ranges-m", ranges_m, float) or cvf.RANGES_M
     currents = parse_list("currents-ma", currents_ma, float) or (20.0,)
     check_seeds("seeds", seeds)

@@ -157,7 +157,12 @@ def camera_rows() -> list[dict]:
                 "full_well_e": s.full_well_e,
                 "adc_bits": s.adc_bits,
                 "exposure_mode": c.exposure.mode,
-                "jpeg": f"q{c.isp.jpeg_quality} {c.isp.chroma_subsampling}",
+                "jpeg": (
+                    f"q{c.isp.jpeg_quality} {c.isp.chroma_subsampling}"
+                    if c.isp.output == "jpeg"
+                    else f"none ({c.isp.output.upper()})"  # an uncompressed frame (isp.output)
+                ),
+                "output": c.isp.output,
             }
         )
     return rows

@@ -95,7 +95,11 @@ PhysicsFrom = Annotated[
 ]
 Cameras = Annotated[
     str | None,
-    typer.Option("--cameras", help="Comma-separated camera names (see 'beacon-sim cameras').", show_default="all"),
+    typer.Option(
+        "--cameras",
+        help="Comma-separated camera names (see 'beacon-sim cameras').",
+        show_default="the source study's four: canon-t6-10mm,canon-t6-18mm,logitech-c270,spedal-920",
+    ),
 ]
 
 

@@ -152,7 +152,7 @@ def capture_frame(task: FrameTask | dict) -> CapturedFrame:
         noise=task.with_noise,
         reference=bool(task.reference_camera),
     )
-    image_bgr = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)  # what was saved
+    image_bgr = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)
 
 

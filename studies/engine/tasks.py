@@ -47,6 +47,12 @@ crop alone (the path before frame version 4)."""
 RENDER = {"spp": 4, "oversampling": 2, "crop": "beacon", "near_field_spp": 1024}
 """Render settings of study frames (near-field marker renders cached per configuration)."""
 
+STUDY_CAMERAS = ("canon-t6-10mm", "canon-t6-18mm", "logitech-c270", "spedal-920")
+"""The source study's four cameras, in the order ``beacon-sim cameras`` lists them: the default of the
+experiments that would otherwise run every camera (``crop-vs-full``, ``colour-reach``). Cameras added
+since (the Raspberry Pi HQ lenses, the mvBlueFOX3-2016C) run where named (``--cameras``), so adding a
+camera file changes no default grid and no main-job result; each study names its own cameras."""
+
 
 @dataclass(frozen=True)
 class StudyOptions:

@@ -162,7 +162,7 @@ def frame_vs_memcpy(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
         t0 = time.perf_counter()
         cap = capture(radiance, camera, seed, None, full=True)
         t1 = time.perf_counter()
-        image = cv2.imdecode(np.frombuffer(cap.image.jpeg, np.uint8), cv2.IMREAD_COLOR)
+        image = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)
         t2 = time.perf_counter()
         for tracker in ("thesis", "best"):
             detect(image, intrinsics, tracker=tracker, estimator="best")
@@ -242,7 +242,7 @@ def whole_frame_paths(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict
                 else:
                     img = process(raw, camera, analog_gain=ex.analog_gain)
                 t3 = time.perf_counter()
-                image = cv2.imdecode(np.frombuffer(img.jpeg, np.uint8), cv2.IMREAD_COLOR)
+                image = cv2.imdecode(np.frombuffer(img.encoded, np.uint8), cv2.IMREAD_COLOR)
                 t4 = time.perf_counter()
                 for tracker in ("thesis", "best"):
                     detect(image, intrinsics, tracker=tracker, estimator="best")

@@ -39,11 +39,10 @@ from pathlib import Path
 import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
-from scenes.view import camera_names
 from studies.engine import frame as engine_frame
 from studies.engine import strict_json
 from studies.engine.scoring import detection_success, pose_success
-from studies.engine.tasks import RENDER, StudyOptions, frame_tasks, grid_conditions
+from studies.engine.tasks import RENDER, STUDY_CAMERAS, StudyOptions, frame_tasks, grid_conditions
 
 RANGES_M = (2.0, 5.0)
 """Ranges of the comparison, m (camera → marker 1)."""
@@ -183,10 +182,11 @@ def run(
     currents_mA: Sequence[float] = (20.0,),
     render: dict | None = None,
 ) -> CropVsFull:
-    """Compare crop and whole frame for every camera (default all of ``beacon-sim cameras``) ×
+    """Compare crop and whole frame for every camera (default the source study's four,
+    :data:`studies.engine.tasks.STUDY_CAMERAS`) ×
     range (m) × current (mA) × seed, in this process (times are per frame, s); write the
     tables into ``out`` when given (module docstring)."""
-    cameras = tuple(cameras or camera_names())
+    cameras = tuple(cameras or STUDY_CAMERAS)
     pairs = comparison_tasks(cameras, ranges_m, seeds, currents_mA, render)
     rows = [row for crop, full in pairs for row in compare_pair(crop, full)]
     result = CropVsFull(rows, summarise(rows), cost(rows))

@@ -106,7 +106,7 @@ def dark_frame_blobs(name: str, seed: int, reference: bool) -> dict[str, int]:
     settings = SensorSettings(ex.exposure_s, ex.analog_gain)
     raw = expose(mean, cam.sensor, settings, seed, path="numpy" if reference else "drjit")
     img = reference_process(raw, cam) if reference else process(raw, cam, analog_gain=ex.analog_gain)
-    bgr = cv2.imdecode(np.frombuffer(img.jpeg, np.uint8), cv2.IMREAD_COLOR)
+    bgr = cv2.imdecode(np.frombuffer(img.encoded, np.uint8), cv2.IMREAD_COLOR)
     intr = Intrinsics.from_geometry(g)
     return {t: len(TRACKERS[t](bgr, intr, (0, 0), {"beacon": "v2"}).blobs) for t in TRACKERS}
 

@@ -68,7 +68,7 @@ def test_legacy_is_the_default_and_matches_the_float_path(name, x0, y0):
 
 
 @pytest.mark.parametrize("highlight", ["clip", "unclip", "blend"])
-@pytest.mark.parametrize("tone", ["srgb", "picture-standard"])
+@pytest.mark.parametrize("tone", ["srgb", "picture-standard", "linear"])
 def test_every_highlight_mode_and_tone_curve_matches_the_float_path(highlight, tone):
     cam = _with(load_camera("canon-t6-18mm"), highlight=highlight, tone_curve=tone, tone_contrast=0.4)
     raw = _seeded_raw(cam)
@@ -232,6 +232,7 @@ def test_bad_options_name_the_field():
         ("noise_reduction", "wavelet"),
         ("tone_curve", "log"),
         ("tone_contrast", 2.0),
+        ("output", "tiff"),
     ]:
         with pytest.raises(ValueError, match=rf"^isp\.{field}: "):
             check_isp_options(_with(cam, **{field: value}))

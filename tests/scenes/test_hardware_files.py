@@ -35,7 +35,7 @@ def _same(a, b, path=""):
         assert a == b, (path, a, b)
 
 
-@pytest.mark.parametrize("name", ["canon-t6-18mm", "logitech-c270"])
+@pytest.mark.parametrize("name", ["canon-t6-18mm", "logitech-c270", "raspberry-pi-hq-16mm", "mvbluefox3-2016c-8mm"])
 def test_camera_template_is_complete(tmp_path, name):
     """The template of a built-in camera loads as that camera (its body written into the file)."""
     path = tmp_path / "mine.toml"
