@@ -594,12 +594,18 @@ def write_report(
             + f"; the other {len(table) - len(pinned)} keep at least {PINNED:.0%} of their range."
         )
     else:
-        alone = [d.observation for d in result.discrepancy if d.rules_out_alone]
+        shares, _ = observation_shares(result)
+        alone = [o.name for o, a in zip(result.observations, shares, strict=True) if a >= 1.0]
         _, worst = closest_points(result, DESCRIBED) if result.waves else (None, np.array([]))
         lead.append(
             "Nothing survives at the stated discrepancies"
-            + (f": {', '.join(alone)} each rule out every point alone." if alone else ".")
-            + " The discrepancy table says how much each observation would need."
+            + (
+                f": {' and '.join(alone)} each rule out the whole space alone (under the first wave's emulators)."
+                if alone
+                else "."
+            )
+            + " The discrepancy table says how much each observation would need where the earlier waves left "
+            "room, and what each rules out alone."
             + (
                 f" The {len(worst)} least implausible reference points (closest.csv; their implausibility "
                 f"{worst.min():.2f}-{worst.max():.2f} against the cut-off {result.settings.cutoff:g}) are what a "

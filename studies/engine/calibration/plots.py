@@ -171,6 +171,11 @@ def fraction_figure(result: HistoryMatch):
     frac = [1.0] + [w.nroy_fraction for w in result.waves]
     floor = 0.5 / result.settings.n_reference
     ax.semilogy(k, np.maximum(frac, floor), "o-")
+    for wave, f in zip(k, frac, strict=True):
+        if f == 0:  # nothing left: drawn at half a reference point, marked so it cannot be read as a value
+            ax.semilogy([wave], [floor], "v", color="C3", ms=9)
+            ax.annotate(f"0 of {result.settings.n_reference}", (wave, floor), textcoords="offset points",
+                        xytext=(-8, 8), ha="right", fontsize=7, color="C3")  # fmt: skip
     ax.set_xticks(k)
     ax.set_xlabel("wave")
     ax.set_ylabel("NROY fraction of the original space")
