@@ -88,6 +88,10 @@ class FarLimit:
     text: str
     interval: str
     farthest_tried_m: float
+    physics: dict | None = None
+    """The noise + physics interval (``--uncertainty``: low, high (None: ≥ the farthest tried), rate,
+    points, order), None without it."""
+    physics_text: str = ""
 
     @classmethod
     def from_record(cls, rec: Mapping) -> FarLimit:
@@ -104,6 +108,8 @@ class FarLimit:
             text=str(rec.get("far_limit", "")),
             interval=str(rec.get("far_interval", "")),
             farthest_tried_m=_number(rec.get("farthest_tested_m"), 0.0),
+            physics=rec.get("far_physics"),
+            physics_text=str(rec.get("far_interval_physics", "")),
         )
 
     @property
@@ -127,6 +133,7 @@ class FarLimit:
             "decided": self.decided,
             "far_limit": self.text,
             "far_interval": self.interval,
+            **({"far_physics": self.physics, "far_interval_physics": self.physics_text} if self.physics else {}),
         }
 
 
@@ -352,6 +359,8 @@ def _working_lines(r: dict, where: str) -> list[str]:
     frames decided it (sequential design), the failures nearer than the best range and the
     source (study, beacon, side, drive, frames)."""
     lines = [r["working_range"], f"far limit 95 % interval: {r['far_interval']}"]
+    if r.get("far_interval_physics"):
+        lines.append(f"with the unknowns (noise + physics): {r['far_interval_physics']}")
     if r.get("decision"):
         lines.append(r["decision"])
     if r.get("near_failures"):
@@ -479,7 +488,8 @@ def _reach_text(recs: Mapping[float, dict], yaws: list[float]) -> str:
         near = _near_text(r)
         frm = f"from {near} " if first_near is None or near != first_near else ""
         first_near = first_near or near
-        parts.append(f"{frm}to {r['far_limit']} at {yaw:g}° (95 %: {r['far_interval']})")
+        physics = f"; noise + physics: {r['far_interval_physics']}" if r.get("far_interval_physics") else ""
+        parts.append(f"{frm}to {r['far_limit']} at {yaw:g}° (95 %: {r['far_interval']}{physics})")
     return " and ".join(parts)
 
 

@@ -267,3 +267,18 @@ def test_a_missing_study_still_gives_a_page(tmp_path, missing):
         assert not (tmp_path / FIGURE_NAME).exists()
     else:
         assert result["decision"]["camera"] == A
+
+
+def test_noise_plus_physics_intervals_reach_the_answers_and_the_first_line():
+    """With --uncertainty, range-limit's records carry a noise + physics interval: answers.json keeps it
+    beside the noise one, and the first line states both."""
+    summaries = _summaries()
+    physics = {"low": 9.1, "high": None, "rate": 1 - 2 / 17, "points": 16, "order": 1}
+    for rec in summaries["range-limit"]["max_range"]:
+        rec.update(far_physics=physics, far_interval_physics="9.1 to ≥ the farthest tried m (88 %, 16 points)")
+    result = answers(summaries, {A: "foam + 1 matched sheet", B: "foam + 1 matched sheet"})
+    assert "(95 %: 15 to 19 m; noise + physics: 9.1 to ≥ the farthest tried m (88 %, 16 points))" in result["headline"]
+    chosen = next(c for c in result["decision"]["limits"] if c["camera"] == A)
+    assert chosen["far_physics"] == physics and chosen["far_interval"] == "14.6 to 18 m"
+    plain = answers(_summaries(), {A: "foam + 1 matched sheet", B: "foam + 1 matched sheet"})
+    assert "noise + physics" not in plain["headline"] and "far_physics" not in plain["decision"]["limits"][0]
