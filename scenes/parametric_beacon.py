@@ -127,4 +127,6 @@ class BeaconParameters:
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{self.name}.toml"
         path.write_text(self.text())
-        return add_hardware_file("beacon", path)
+        name = add_hardware_file("beacon", path)
+        beacon_design(name)  # its geometry checked now (e.g. the node behind the targets), not at the first render
+        return name

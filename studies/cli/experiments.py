@@ -557,6 +557,70 @@ def sensitivity(
     console.print(f"sensitivity: {summary['wall_s']:.0f} s; wrote {out}/report.html and sensitivity.json")
 
 
+def design(
+    out: Annotated[
+        Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory (--resume to go on).")
+    ],
+    camera: opt.Camera = "logitech-c270",
+    side: opt.Side = "red",
+    yaw_deg: Annotated[float, typer.Option("--yaw-deg", help="Beacon yaw the far limit is wanted at, degrees.")] = 30.0,
+    max_side_power_mw: Annotated[
+        float, typer.Option("--max-side-power-mw", help="Optical power budget of one side (five LEDs), mW.")
+    ] = 10.0,
+    max_span_mm: Annotated[
+        float | None,
+        typer.Option(
+            "--max-span-mm", help="Largest target span (in-plane markers and lit faces), mm.", show_default="none"
+        ),
+    ] = None,
+    trials: Annotated[int, typer.Option("--trials", help="Designs to evaluate (each a range-limit run).")] = 40,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the search in --out (to --trials).")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid per design.")] = False,
+    seed: opt.Seed = 0,
+    workers: opt.Workers = None,
+) -> None:
+    """Search the beacon's design (marker offsets, lit face, drive, diffusers) for the far limit at a yaw
+    under a power budget: the Pareto front of far limit, power and span, beside V2 at the same budget."""
+    from studies.catalog import design as search_design
+    from studies.cli.common import rich_progress
+
+    if camera not in camera_names():
+        raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {camera!r}")
+    if not 0 <= yaw_deg <= 90:
+        raise UsageError(f"yaw-deg: expected an angle in [0, 90], got {yaw_deg:g}")
+    ranges = {p.name: p for p in search_design.SPACE.params}
+    least = search_design.side_power_mW(side, ranges["led_current_mA"].low)
+    if not max_side_power_mw >= least:
+        raise UsageError(
+            f"max-side-power-mw: expected at least {least:.3g} mW (five LEDs at the search's lowest drive, "
+            f"{ranges['led_current_mA'].low:g} mA): no design fits {max_side_power_mw:g}"
+        )
+    smallest = 2 * ranges["arm_length_mm"].low + ranges["lit_face_diameter_mm"].low
+    if max_span_mm is not None and not max_span_mm >= smallest:
+        raise UsageError(
+            f"max-span-mm: expected at least {smallest:g} mm (the smallest design's span), got {max_span_mm:g}"
+        )
+    if trials < 1:
+        raise UsageError(f"trials: expected an integer >= 1, got {trials}")
+    target = search_design.Target(camera=camera, side=side, yaw_deg=yaw_deg, quick=quick)
+    budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
+    run_on = execution(workers)
+    check_render_cache()
+    prepare_out_dir(out)
+    with rich_progress("design search", trials, 0) as advance:
+        try:
+            summary = search_design.run(
+                out, target, budget, trials=trials, seed=seed, resume=resume, execution=run_on,
+                progress=lambda p: advance(),
+            )  # fmt: skip
+        except (FileExistsError, ValueError) as exc:
+            raise UsageError(str(exc).splitlines()[0]) from None
+    console.print(
+        f"design: {summary['evaluations']} designs, {summary['feasible']} within budget; "
+        f"{summary['wall_s']:.0f} s; wrote {out}/report.html and design.json"
+    )
+
+
 def crop_vs_full(
     out: opt.Out,
     cameras: opt.Cameras = None,
@@ -630,6 +694,7 @@ COMMANDS = {
     "unknowns-search": unknowns_search,
     "calibrate-unknowns": calibrate_unknowns,
     "sensitivity": sensitivity,
+    "design": design,
     "colour-reach": colour_reach,
     "crop-vs-full": crop_vs_full,
     "tracker-pruning": tracker_pruning,

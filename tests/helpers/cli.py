@@ -45,6 +45,7 @@ WORK_FUNCTIONS = {
     "studies.catalog.unknowns_search": ["run"],
     "studies.catalog.calibration": ["run"],
     "studies.catalog.sensitivity": ["run"],
+    "studies.catalog.design": ["run"],
     "studies.catalog.webcam_vs_dslr": ["run"],
     "studies.catalog.brightness_diffuser": ["run"],
     "studies.catalog.range_limit": ["run"],

@@ -1,0 +1,247 @@
+"""``beacon-sim design``: search the beacon's design for the one that reaches farthest with a camera.
+
+A design (:data:`SPACE`) is a parametric beacon (:class:`scenes.parametric_beacon.BeaconParameters`:
+in-plane and out-of-plane marker offsets, lit face) with what a run sets per side (LED drive, foam,
+paper sheets). Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`)
+of one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, best tracker; "≥ the farthest
+range tried" counts as that range), the optical power of one side (five LEDs' radiant flux at the
+drive, :meth:`scenes.led.Led.radiant_flux_W`) and the target's span (:attr:`BeaconParameters.span_mm`).
+The search (:func:`studies.engine.design_search.search`: optuna's multivariate TPE, resumable from
+``out/search.journal``) maximises the far limit and minimises power and span within the user's
+budget (power per side, span), and the report puts the front beside V2 as built (foam + one matched
+sheet) at the drive that spends the same power per side.
+
+The far limit is the nominal point's (noise and pose only); the physics interval of a design
+(``--uncertainty``) is not searched over: each would cost N range-limit runs.
+
+Outputs in ``out``: ``search.journal``, ``front.csv``, ``trials.csv``, ``summary.json`` (the
+search's), ``design.json`` (the front beside V2, the budget, counts and wall time), ``report.html``,
+``beacons/`` (each candidate's beacon file) and ``evaluations/`` (each design's range-limit run).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from scenes.led import led_for_side
+from scenes.parametric_beacon import BeaconParameters
+from scenes.render_cache import atomic_write_bytes
+from studies.catalog import range_limit
+from studies.engine import strict_json
+from studies.engine.design_search import (
+    Constraint,
+    DesignSpace,
+    Metric,
+    Objective,
+    choice_param,
+    float_param,
+    int_param,
+    search,
+    write_results,
+)
+from studies.engine.report import Report
+from studies.engine.sequential import SequentialDesign
+from studies.engine.sweep import Execution
+from studies.engine.tasks import StudyOptions
+
+__all__ = ["MARKERS", "NAME", "SPACE", "Budget", "Target", "evaluate_design", "run", "v2_at"]
+
+NAME = "design"
+MARKERS = 5
+"""LEDs of one side."""
+V2_AS_BUILT = {"foam": True, "paper_sheets": 1}
+"""V2's diffusers as built (docs/source-study.md §2: foam and one sheet of paper)."""
+
+SPACE = DesignSpace(
+    (
+        float_param("arm_length_mm", 30.0, 150.0, unit="mm",
+                    assumed="from a compact cross (V1: 45 mm) to a 0.3 m target a dropped node can carry; the "
+                    "study proposes larger in-plane offsets (as issue 27 reports its closing proposals)"),
+        float_param("out_of_plane_mm", 10.0, 65.0, unit="mm",
+                    assumed="V2's 46 mm within what V2's node allows: the targets' backs must clear the node "
+                    "(d_t 140 - housing depth 15 - arm width 8 - node radius 50 = 67 mm, scenes/data/beacons/v2.toml); "
+                    "the study proposes a shorter out-of-plane arm (as issue 27 reports its closing proposals)"),
+        float_param("lit_face_diameter_mm", 6.0, 25.0, unit="mm",
+                    assumed="from a bare 5 mm LED's lens (plus a margin) to a 25 mm diffuser window"),
+        float_param("led_current_mA", 0.5, 20.0, log=True, unit="mA",
+                    assumed="dimmed drives like the study's potentiometers (docs/source-study.md §2.9; the registry's "
+                    "led_drive goes to 0.05 mA) up to the datasheets' 20 mA test current"),
+        choice_param("foam", [True, False], assumed="with or without the foam disc behind the paper (docs/source-study.md §2.8, §3)"),  # noqa: E501
+        int_param("paper_sheets", 0, 3, assumed="0-3 sheets of paper in front of the LED (the study used one)"),
+    )
+)  # fmt: skip
+"""The design parameters and where their ranges come from."""
+METRICS = (Metric("far_limit_m", "m", 0.0, 20.0), Metric("side_power_mW", "mW", 0.0), Metric("span_mm", "mm", 0.0))
+OBJECTIVES = (
+    Objective("far_limit_m", "maximize"),
+    Objective("side_power_mW", "minimize"),
+    Objective("span_mm", "minimize"),
+)
+
+
+@dataclass(frozen=True)
+class Target:
+    """What a design is evaluated on: one camera, side and yaw."""
+
+    camera: str
+    side: str = "red"
+    yaw_deg: float = 30.0
+    quick: bool = False
+
+
+@dataclass(frozen=True)
+class Budget:
+    """The user's constraints: optical power of one side, mW, and the target's span, mm (None: no limit)."""
+
+    side_power_mW: float = 10.0
+    span_mm: float | None = None
+
+    def constraints(self) -> tuple[Constraint, ...]:
+        out = [Constraint("side_power_mW", "<=", float(self.side_power_mW))]
+        if self.span_mm is not None:
+            out.append(Constraint("span_mm", "<=", float(self.span_mm)))
+        return tuple(out)
+
+
+def side_power_mW(side: str, current_mA: float) -> float:
+    """Optical power of one side's five LEDs at ``current_mA``, mW."""
+    return MARKERS * 1e3 * led_for_side(side).radiant_flux_W(current_mA)
+
+
+def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
+    return StudyOptions(
+        cameras=(target.camera,),
+        beacons=(beacon,),
+        sides=(target.side,),
+        yaws_deg=(float(target.yaw_deg),),
+        currents_mA=(round(float(design["led_current_mA"]), 6),),
+        diffusers=((bool(design["foam"]), int(design["paper_sheets"]), "matched"),),
+        ranges_m=(2.0, 5.0, 8.0, 12.0) if target.quick else (2.0, 4.0, 6.0, 8.0, 10.0, 12.0),
+        seeds=2 if target.quick else 3,
+        jitter_poses=1 if target.quick else 2,
+    )
+
+
+def evaluate_design(design: dict, target: Target, out: Path, execution: Execution = Execution()) -> dict[str, float]:
+    """A design's metrics: its beacon registered, a sequential range-limit run of ``target`` in
+    ``out/evaluations/<beacon>``, the far limit of its best-tracker record."""
+    params = BeaconParameters(
+        arm_length_mm=round(float(design["arm_length_mm"]), 3),
+        out_of_plane_mm=round(float(design["out_of_plane_mm"]), 3),
+        lit_face_diameter_mm=round(float(design["lit_face_diameter_mm"]), 3),
+    )
+    beacon = params.register(out / "beacons")
+    options = _options(target, beacon, design)
+    options.validate()
+    run_out = (
+        out / "evaluations" / f"{beacon}-{options.currents_mA[0]:g}mA-{int(design['foam'])}-{design['paper_sheets']}"
+    )
+    summary = range_limit.run(
+        run_out, options, execution, design=SequentialDesign(target_relative=0.2, max_range_m=20.0)
+    )
+    rec = summary["max_range"][0]
+    far = float(rec["farthest_tested_m"]) if rec.get("at_least") else max(float(rec["max_range_m"]), 0.0)
+    return {
+        "far_limit_m": far,
+        "side_power_mW": side_power_mW(target.side, float(design["led_current_mA"])),
+        "span_mm": params.span_mm,
+    }
+
+
+def v2_at(budget: Budget, target: Target) -> dict:
+    """V2 as built at the drive that spends the budget's power per side (its datasheet maximum if lower)."""
+    led = led_for_side(target.side)
+    per_mA = side_power_mW(target.side, 1.0)  # radiant flux is linear in the drive below the reference current
+    current = min(budget.side_power_mW / per_mA, led.reference_current_mA)
+    v2 = BeaconParameters.of("v2")
+    return {
+        "arm_length_mm": v2.arm_length_mm,
+        "out_of_plane_mm": v2.out_of_plane_mm,
+        "lit_face_diameter_mm": v2.lit_face_diameter_mm,
+        "led_current_mA": round(current, 6),
+        **V2_AS_BUILT,
+    }
+
+
+def run(
+    out: Path,
+    target: Target,
+    budget: Budget,
+    *,
+    trials: int = 40,
+    seed: int = 0,
+    resume: bool = False,
+    execution: Execution = Execution(),
+    progress: Callable | None = None,
+) -> dict:
+    """Search the designs into ``out`` (module docstring); returns what ``design.json`` holds."""
+    t0 = time.perf_counter()
+    out = Path(out)
+    context = {"target": target.__dict__, "budget": budget.__dict__}
+    result = search(
+        SPACE,
+        lambda d: evaluate_design(d, target, out, execution),
+        OBJECTIVES,
+        budget.constraints(),
+        metrics=METRICS,
+        trials=trials,
+        seed=seed,
+        out=out,
+        resume=resume,
+        context=context,
+        progress=progress,
+    )
+    write_results(result, out)
+    reference = v2_at(budget, target)
+    v2 = {"design": reference, "metrics": evaluate_design(reference, target, out, execution)}
+    summary = {
+        "study": NAME,
+        "target": target.__dict__,
+        "budget": budget.__dict__,
+        "evaluations": result.evaluations,
+        "feasible": result.feasible,
+        "infeasible": result.infeasible,
+        "front": [{"trial": p.trial, "design": p.design, "metrics": p.metrics} for p in result.front],
+        "v2_at_budget": v2,
+        "wall_s": time.perf_counter() - t0,
+    }
+    atomic_write_bytes(out / "design.json", strict_json.dumps(summary, indent=2).encode())
+    _report(out, summary)
+    return summary
+
+
+def _report(out: Path, summary: dict) -> None:
+    t, b, v2 = summary["target"], summary["budget"], summary["v2_at_budget"]
+    rep = Report(f"Design search: the beacon that reaches farthest with {t['camera']} at {t['yaw_deg']:g}°")
+    span = f" and a span under {b['span_mm']:g} mm" if b.get("span_mm") else ""
+    lead = [
+        f"{summary['evaluations']} designs evaluated ({summary['feasible']} within {b['side_power_mW']:g} mW per "
+        f"side{span}); each a sequential range-limit run of the {t['side']} side.",
+        f"V2 as built at the same budget ({v2['design']['led_current_mA']:g} mA, foam + 1 sheet): far limit "
+        f"{v2['metrics']['far_limit_m']:.3g} m at {v2['metrics']['side_power_mW']:.3g} mW per side.",
+    ]
+    if summary["front"]:
+        best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
+        d, m = best["design"], best["metrics"]
+        lead.append(
+            f"Farthest on the front: {m['far_limit_m']:.3g} m with {d['arm_length_mm']:.0f} mm arms, the centre "
+            f"marker {d['out_of_plane_mm']:.0f} mm out, {d['lit_face_diameter_mm']:.0f} mm lit faces, "
+            f"{d['led_current_mA']:.3g} mA, {'foam + ' if d['foam'] else ''}{d['paper_sheets']} sheets "
+            f"({m['side_power_mW']:.3g} mW per side, {m['span_mm']:.0f} mm span)."
+        )
+    else:
+        lead.append(summary["infeasible"] or "No design met the budget.")
+    rep.lead(lead)
+    rows = [{**p["design"], **p["metrics"], "trial": p["trial"]} for p in summary["front"]]
+    rows.append({**v2["design"], **v2["metrics"], "trial": "V2 as built"})
+    rep.table(pd.DataFrame(rows), "The Pareto front (far limit, power per side, span) and V2 at the same budget",
+              float_format="{:.3g}")  # fmt: skip
+    rep.text(
+        f"Run time {summary['wall_s']:.0f} s; the far limit is the nominal point's (noise and pose only).", note=True
+    )
+    rep.write(out / "report.html")

@@ -1,0 +1,92 @@
+"""beacon-sim design on fake frames of a planted truth: longer arms and more drive reach farther, so
+under a power budget the search finds long arms at the budget's drive, beside V2 at that budget;
+the command refuses bad budgets in one line before any work."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from scenes.beacon import beacon_design
+from scenes.hardware import clear_user_hardware
+from studies.catalog import design
+from studies.engine import sequential
+from tests.helpers.planted_frames import FALL_OFF_M, planted_rows
+
+
+def _r50(task) -> float:
+    """Far limit's midpoint, m: grows with the arm (the study's resolution argument) and the drive."""
+    sc = task["scenario"]
+    arm_mm = beacon_design(sc["beacon"]).arm_length_m * 1e3
+    return 2.0 + 0.06 * arm_mm + 1.5 * math.log(sc["led_current_mA"])
+
+
+@pytest.fixture
+def planted(monkeypatch):
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(_r50))
+    yield
+    clear_user_hardware()
+
+
+def test_the_search_finds_long_arms_at_the_budgets_drive_and_compares_v2(planted, tmp_path):
+    target = design.Target(camera="logitech-c270", side="red", yaw_deg=30.0, quick=True)
+    budget = design.Budget(side_power_mW=10.0)
+    summary = design.run(tmp_path, target, budget, trials=24, seed=0)
+    assert summary["evaluations"] == 24 and summary["feasible"] > 0
+    assert all(p["metrics"]["side_power_mW"] <= 10.0 for p in summary["front"])
+    best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
+    # the planted optimum: the longest arm (150 mm) at the budget's drive; far limit r50 - s ln 19
+    top_mA = 10.0 / design.side_power_mW("red", 1.0)
+    optimum = 2.0 + 0.06 * 150 + 1.5 * math.log(top_mA) - FALL_OFF_M * math.log(19)
+    assert best["design"]["arm_length_mm"] > 100 and best["design"]["led_current_mA"] > 3.0
+    assert best["metrics"]["far_limit_m"] > 0.8 * optimum  # 24 evaluations, each limit fitted to ±20 %
+    v2 = summary["v2_at_budget"]
+    assert v2["design"]["led_current_mA"] == pytest.approx(10.0 / design.side_power_mW("red", 1.0), rel=1e-6)
+    assert v2["design"]["arm_length_mm"] == 70.0 and v2["metrics"]["side_power_mW"] == pytest.approx(10.0)
+    assert best["metrics"]["far_limit_m"] > v2["metrics"]["far_limit_m"]  # 140+ mm arms beat V2's 70 at equal power
+    stored = json.loads((tmp_path / "design.json").read_text())
+    assert stored["front"] == summary["front"] and (tmp_path / "report.html").is_file()
+    assert (tmp_path / "front.csv").is_file() and (tmp_path / "search.journal").is_file()
+    # resumed to more trials: the first 24 evaluations are kept, not redone
+    more = design.run(tmp_path, target, budget, trials=28, seed=0, resume=True)
+    assert more["evaluations"] == 28
+
+
+def test_v2_and_v1_are_instances_of_the_parametric_beacon(tmp_path):
+    import numpy as np
+
+    from scenes.parametric_beacon import BeaconParameters
+
+    try:
+        for name in ("v1", "v2"):
+            copy = beacon_design(BeaconParameters.of(name).register(tmp_path))
+            for a, b in zip(copy.markers, beacon_design(name).markers, strict=True):
+                assert np.allclose(a.position_m, b.position_m) and np.allclose(a.normal, b.normal)
+        assert BeaconParameters.of("v2").span_mm == 2 * 70 + 12
+        with pytest.raises(ValueError, match=r"arm_length_mm: expected a size > 0 mm, got -5"):
+            BeaconParameters(arm_length_mm=-5, out_of_plane_mm=40, lit_face_diameter_mm=12)
+        with pytest.raises(ValueError, match=r"in_plane_leds_face: expected one of viewer, outward"):
+            BeaconParameters(70, 40, 12, in_plane_leds_face="up")
+    finally:
+        clear_user_hardware()
+
+
+@pytest.mark.parametrize(
+    ("args", "field"),
+    [
+        (["--camera", "logitech-c270", "--max-side-power-mw", "-1"], "max-side-power-mw"),
+        (["--camera", "logitech-c270", "--max-side-power-mw", "0.0001"], "max-side-power-mw"),
+        (["--camera", "logitech-c270", "--max-span-mm", "20"], "max-span-mm"),
+        (["--camera", "nope"], "camera"),
+        (["--camera", "logitech-c270", "--trials", "0"], "trials"),
+    ],
+)
+def test_bad_budgets_are_refused_in_one_line_before_any_work(monkeypatch, tmp_path, args, field):
+    from tests.helpers.cli import assert_one_line_error, invoke, patch_work
+
+    patch_work(monkeypatch)
+    code, _, err = invoke(["design", "--out", str(tmp_path / "o"), *args])
+    assert_one_line_error(code, err, field)
+    assert not (tmp_path / "o").exists()
