@@ -673,8 +673,10 @@ def write_results(result: SearchResult, out: Path | str) -> tuple[Path, Path, Pa
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = (out / "front.csv", out / "trials.csv", out / "summary.json")
-    atomic_write_bytes(paths[0], result.front_frame().to_csv(index=False).encode())
-    atomic_write_bytes(paths[1], result.trials.to_csv(index=False).encode())
+    # every float to 17 significant digits (exact): pandas writes numpy's str(), which is 12 digits once
+    # numpy's printing is in its 1.13 legacy mode (colour-science sets that on import)
+    atomic_write_bytes(paths[0], result.front_frame().to_csv(index=False, float_format="%.17g").encode())
+    atomic_write_bytes(paths[1], result.trials.to_csv(index=False, float_format="%.17g").encode())
     atomic_write_bytes(paths[2], (dumps(result.summary(), indent=2) + "\n").encode())
     return paths
 
