@@ -130,7 +130,7 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design:
     summary = analyse(frame, design)
     if options.physics:
         summary["physics"] = {"points": len(options.physics), "source": options.physics_source}
-    _report(Path(out), options, frame, summary)
+    _report(Path(out), options, nominal_rows(frame), summary)
     atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
@@ -147,9 +147,8 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
     at_points = frame[frame["point"].notna()] if "point" in frame else frame.iloc[:0]
-    if len(at_points):
-        frame = frame[frame["point"].isna()]
     physics = _physics_limits(at_points)
+    frame = nominal_rows(frame)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
         cam, beacon, side, current, yaw, tracker = key
@@ -196,6 +195,11 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     if design is not None:
         summary["design"] = design
     return summary
+
+
+def nominal_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the nominal point (a run with ``--uncertainty`` also holds rows at its points)."""
+    return frame[frame["point"].isna()] if "point" in frame else frame
 
 
 def _physics_limits(rows: pd.DataFrame) -> dict[tuple, list[float]]:
@@ -290,14 +294,15 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
                 f"Fraction of correct poses versus range at {shown_yaws} (every yaw is in the tables), {label}, with "
                 "its 95 % credible interval (Beta posterior, Jeffreys prior; frames at each point in the table "
                 "below); bars under the axis, the working range (thick) and the far limit's 95 % interval (thin; an "
-                "arrow: it reaches past the farthest range tried). Points of different series are offset sideways "
-                "so none hides another.",
+                "arrow: it reaches past the farthest range tried); with --uncertainty a wide pale band, the noise + "
+                "physics interval. Points of different series are offset sideways so none hides another.",
             )
             if len(set(table.yaw_deg)) > 2:
                 rep.figure(
                     _far_limit_figure(plt, table),
                     f"Far limit (95 % interval) versus yaw, {label}; dashed: the design's planned "
-                    f"{PLANNED_RANGE_M:g} m; an arrow: the interval reaches past the farthest range tried.",
+                    f"{PLANNED_RANGE_M:g} m; an arrow: the interval reaches past the farthest range tried; a wide "
+                    "pale band (with --uncertainty): the noise + physics interval.",
                 )
         else:
             rep.text(f"No frame gave a correct pose with the {label}.")
@@ -480,7 +485,11 @@ def _series_label(key: tuple) -> str:
 
 
 def _working_bar(ax, rec, y: float, colour: str, farthest: float) -> None:
-    """The working range (thick) and the far limit's interval (thin) at height y."""
+    """The working range (thick), the far limit's interval (thin) and, with ``--uncertainty``, its noise +
+    physics interval (a wide pale band) at height y."""
+    physics = _physics_span(getattr(rec, "far_physics", None), farthest)
+    if physics:
+        ax.plot(physics, [y, y], color=colour, lw=11, alpha=0.22, solid_capstyle="butt")
     if rec.max_range_m > 0:
         near = rec.nearest_tested_m if rec.near_at_most else rec.near_limit_m
         ax.plot([near, rec.max_range_m], [y, y], color=colour, lw=5, solid_capstyle="butt")
@@ -489,6 +498,14 @@ def _working_bar(ax, rec, y: float, colour: str, farthest: float) -> None:
     ax.plot([low, high], [y, y], color=colour, lw=1.2)
     if not math.isfinite(rec.high_m):
         ax.annotate("", xy=(farthest + 0.5, y), xytext=(farthest, y), arrowprops={"arrowstyle": "->", "color": colour})
+
+
+def _physics_span(physics, farthest: float) -> tuple[float, float] | None:
+    """(low, high) of a record's noise + physics interval, m, the farthest range tried for an open end;
+    None without one."""
+    if not isinstance(physics, dict):
+        return None
+    return float(physics["low"]), farthest if physics["high"] is None else float(physics["high"])
 
 
 def _far_limit_figure(plt, table: pd.DataFrame):
@@ -509,6 +526,10 @@ def _far_limit_figure(plt, table: pd.DataFrame):
                 continue
             x = g.yaw_deg + (i - (len(keys) - 1) / 2) * 0.4
             r = g.max_range_m.to_numpy(float)
+            for xi, physics in zip(x, g.get("far_physics", [None] * len(g)), strict=True):
+                span = _physics_span(physics, top)
+                if span:
+                    ax.plot([xi, xi], span, color=styles[k]["color"], lw=9, alpha=0.22, solid_capstyle="butt")
             hi = np.where(np.isfinite(g.high_m), g.high_m, top)
             ax.errorbar(
                 x,

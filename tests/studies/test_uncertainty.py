@@ -85,7 +85,9 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
     summary = range_limit.run(tmp_path / "physics", with_points, design=design)
     rec = summary["max_range"][0]
     assert summary["physics"] == {"points": 16, "source": "16 planted points"}
+    assert summary["outcomes"] == range_limit.run(tmp_path / "nominal", base, design=design)["outcomes"]  # nominal only
     page = (tmp_path / "physics" / "report.html").read_text()
+    assert f"{nominal['successes']} of {nominal['frames']}" in page  # the answer table: the nominal frames
     assert "far limit, noise + physics" in page and "each condition also ran at 16 planted points" in page
     assert {k: rec[k] for k in ("max_range_m", "low_m", "high_m", "frames")} == {
         k: nominal[k] for k in ("max_range_m", "low_m", "high_m", "frames")
