@@ -107,11 +107,14 @@ def run(
     """Run the study into ``out``; returns the summary (``max_range`` records).
 
     ``design``: place the frames sequentially (:mod:`studies.engine.sequential`), starting from
-    ``options``' grid; None: the fixed grid."""
+    ``options``' grid; None: the fixed grid. With points of the unknowns (``options.physics``) every
+    point repeats the grid, and its budget (a budget of frames is the nominal grid's)."""
     if design is None:
         frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
         return write_outputs(out, options, frame)
     fields = UNIT_FIELDS + ((("point", "point"),) if options.physics else ())  # each point a unit of its own
+    if options.physics and design.budget_frames is not None:  # a budget is the nominal grid's: each point repeats it
+        design = design.with_overrides(budget_frames=design.budget_frames * (len(options.physics) + 1))
     result = run_design(NAME, options, design, out, fields, estimators=["best"], execution=execution)
     return write_outputs(out, options, write_tables(out, result.rows), result.summary())
 

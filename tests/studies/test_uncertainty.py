@@ -158,3 +158,19 @@ def test_physics_points_take_what_the_calibration_covered_from_its_nroy_set(tmp_
     assert "from their registry ranges" in which and alone != points
     with pytest.raises(ValueError, match=r"uncertainty: expected an integer >= 1"):
         prediction_set.physics_points(0)
+
+
+def test_the_main_jobs_design_budget_grows_with_the_points(monkeypatch, tmp_path):
+    """A budget of frames is the nominal grid's; with N points each repeats it (else the coarse grid alone
+    would exceed it and the run would be refused)."""
+    from studies.catalog import range_limit
+    from studies.engine import sequential
+    from tests.helpers.planted_frames import planted_rows
+
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 6.0))
+    options = range_limit.default_options(True).with_overrides(
+        cameras=("logitech-c270",), yaws_deg=(0.0,), physics=({"led_intensity_red": 4.0}, {"led_intensity_red": 6.0})
+    )
+    design = range_limit.default_design(True).with_overrides(budget_frames=40)
+    summary = range_limit.run(tmp_path, options, design=design)
+    assert summary["design"]["budget_frames"] == 120 and summary["design"]["frames"] <= 120
