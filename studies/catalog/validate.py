@@ -27,7 +27,8 @@ study's tracker runs with its printed settings except where the study says a ses
 ``validation.csv`` has one row per tested condition (means over seeds and points;
 ``detected_low``/``high`` span the Wilson 95 % intervals of every point, i.e. an interval over the
 set and the seeds; ``points`` counts them; ``extra_blobs``/``merged``/``lost_fraction`` say why
-frames were missed); the report marks the study's headline conclusions agree/disagree from those rows.
+frames were missed; ``focus_distance_m_low``/``high`` span the lens focus over the points, NaN for
+the fixed-focus webcams); the report marks the study's headline conclusions agree/disagree from those rows.
 """
 
 from __future__ import annotations
@@ -322,9 +323,24 @@ def validation_table(frame):
                 "rectification": rec["rectification"],
                 **_intervals(detected, g),
                 **failures,
+                **dict.fromkeys(("focus_distance_m_low", "focus_distance_m_high"), _focus_m(recs[0])),
             }
         )
     return _over_points(pd.DataFrame(per_point))
+
+
+FOCUS = "camera.effects.focus_distance_m"
+"""The rows' column of a task's focus distance (its camera override)."""
+
+
+def _focus_m(row: dict) -> float:
+    """The lens focus a frame was made with, m: the point's, or the registry's nominal for its lens;
+    NaN for a fixed-focus webcam (its blur is its lens's, not an unknown focus)."""
+    value = row.get(FOCUS)
+    if value is not None and np.isfinite(value):
+        return float(value)
+    lens = [u for u in load_unknowns().values() if u.target == FOCUS and row["camera"] in u.cameras]
+    return float(lens[0].nominal) if lens else np.nan
 
 
 def _failure_kinds(recs: list[dict]) -> dict:

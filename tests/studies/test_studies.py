@@ -103,8 +103,11 @@ def test_validate_tiny(tmp_path, monkeypatch):
     assert list(table.columns[12:]) == [
         "core_saturation", "thresholds", "weights", "rectification", "detected_low", "detected_high",
         "yaw_est_low", "yaw_est_high", "range_est_low", "range_est_high", "extra_blobs_fraction",
-        "merged_fraction", "lost_fraction", "points",
+        "merged_fraction", "lost_fraction", "focus_distance_m_low", "focus_distance_m_high", "points",
     ]  # fmt: skip
+    t6 = table[table.camera == "canon-t6-18mm"]
+    assert (t6.focus_distance_m_low == 3.0).all() and (t6.focus_distance_m_high == 3.0).all()  # nominal, one point
+    assert table[table.camera == "logitech-c270"].focus_distance_m_low.isna().all()  # fixed focus
     for cause in ("extra_blobs_fraction", "merged_fraction", "lost_fraction"):  # causes of missed frames only
         assert (table[cause] <= 1 - table.detected_fraction + 1e-9).all()
     assert (table.points == 1).all()  # no calibration: the unknowns at nominal, one point
@@ -164,11 +167,12 @@ def test_validation_table_spans_the_calibrated_points():
         "environment": "dark-room", "nominal_range_m": 3.0, "nominal_yaw_deg": 0.0, "weights": "tuned",
         "rectification": "none", "side_blobs": 5, "core_saturated_fraction_mean": 0.5, "yaw_est_deg": 1.0,
     }  # fmt: skip
-    frames = [  # point 0: 4 of 4 detected; point 1: 1 of 4
-        {**base, "point": p, "detected": d, "side_correct": d, "range_est_m": r if d else np.nan}
-        for p, ds, r in ((0, [True] * 4, 3.1), (1, [True, False, False, False], 2.5))
+    frames = [  # point 0: 4 of 4 detected, focused at 2 m; point 1: 1 of 4, at 40 m
+        {**base, "point": p, "detected": d, "side_correct": d, "range_est_m": r if d else np.nan,
+         "camera.effects.focus_distance_m": f}
+        for p, ds, r, f in ((0, [True] * 4, 3.1, 2.0), (1, [True, False, False, False], 2.5, 40.0))
         for d in ds
-    ]
+    ]  # fmt: skip
     table = validate.validation_table(pd.DataFrame(frames))
     assert len(table) == 1
     row = table.iloc[0]
@@ -176,6 +180,7 @@ def test_validation_table_spans_the_calibrated_points():
     assert row.detected_low == pytest.approx(wilson_interval(1, 4)[1])  # the worse point's lower bound
     assert row.detected_high == pytest.approx(wilson_interval(4, 4)[2])
     assert (row.range_est_low, row.range_est_high) == (2.5, 3.1)
+    assert (row.focus_distance_m_low, row.focus_distance_m_high) == (2.0, 40.0)  # the lens focus over the points
 
 
 def _tiny_options(**kw):
