@@ -2,8 +2,9 @@
 
 A design (:data:`SPACE`) is a parametric beacon (:class:`scenes.parametric_beacon.BeaconParameters`:
 in-plane and out-of-plane marker offsets, lit face) with what a run sets per side (LED drive, foam,
-paper sheets). Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`)
-of one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, best tracker; "≥ the farthest
+paper sheets), and, for an interchangeable-lens body, the lens's focal length (:func:`space_for`).
+Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`) of
+one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, best tracker; "≥ the farthest
 range tried" counts as that range), the optical power of one side (five LEDs' radiant flux at the
 drive, :meth:`scenes.led.Led.radiant_flux_W`) and the target's span (:attr:`BeaconParameters.span_mm`).
 The search (:func:`studies.engine.design_search.search`: optuna's multivariate TPE, resumable from
@@ -23,11 +24,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pandas as pd
 
+from camera_models.lens_variant import register_lens_variant
 from scenes.led import led_for_side
 from scenes.parametric_beacon import BeaconParameters
 from scenes.render_cache import atomic_write_bytes
@@ -49,7 +51,7 @@ from studies.engine.sequential import SequentialDesign
 from studies.engine.sweep import Execution
 from studies.engine.tasks import StudyOptions
 
-__all__ = ["MARKERS", "NAME", "SPACE", "Budget", "Target", "evaluate_design", "run", "v2_at"]
+__all__ = ["MARKERS", "NAME", "SPACE", "Budget", "Target", "evaluate_design", "run", "space_for", "v2_at"]
 
 NAME = "design"
 MARKERS = 5
@@ -86,12 +88,25 @@ OBJECTIVES = (
 
 @dataclass(frozen=True)
 class Target:
-    """What a design is evaluated on: one camera, side and yaw."""
+    """What a design is evaluated on: one camera, side and yaw; ``focal_lengths_mm`` (low, high) also
+    searches the lens of an interchangeable-lens body (:mod:`camera_models.lens_variant`)."""
 
     camera: str
     side: str = "red"
     yaw_deg: float = 30.0
     quick: bool = False
+    focal_lengths_mm: tuple[float, float] | None = None
+
+
+def space_for(target: Target) -> DesignSpace:
+    """:data:`SPACE`, with the lens's focal length when the target searches it."""
+    if target.focal_lengths_mm is None:
+        return SPACE
+    low, high = target.focal_lengths_mm
+    lens = float_param("focal_length_mm", float(low), float(high), log=True, unit="mm",
+                       assumed="the user's range of lenses for the body (--focal-length-mm), each at the base "
+                       "lens's f-number, blur and distortion")  # fmt: skip
+    return DesignSpace((*SPACE.params, lens))
 
 
 @dataclass(frozen=True)
@@ -136,6 +151,9 @@ def evaluate_design(design: dict, target: Target, out: Path, execution: Executio
         lit_face_diameter_mm=round(float(design["lit_face_diameter_mm"]), 3),
     )
     beacon = params.register(out / "beacons")
+    if "focal_length_mm" in design:
+        lens = round(float(design["focal_length_mm"]), 3)
+        target = replace(target, camera=register_lens_variant(target.camera, lens, out / "cameras"))
     options = _options(target, beacon, design)
     options.validate()
     run_out = (
@@ -184,7 +202,7 @@ def run(
     out = Path(out)
     context = {"target": target.__dict__, "budget": budget.__dict__}
     result = search(
-        SPACE,
+        space_for(target),
         lambda d: evaluate_design(d, target, out, execution),
         OBJECTIVES,
         budget.constraints(),

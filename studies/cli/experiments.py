@@ -573,6 +573,14 @@ def design(
             "--max-span-mm", help="Largest target span (in-plane markers and lit faces), mm.", show_default="none"
         ),
     ] = None,
+    focal_length_mm: Annotated[
+        str | None,
+        typer.Option(
+            "--focal-length-mm",
+            help="LOW,HIGH: also search the lens of an interchangeable-lens body (e.g. 4,35).",
+            show_default="the camera's own lens",
+        ),
+    ] = None,
     trials: Annotated[int, typer.Option("--trials", help="Designs to evaluate (each a range-limit run).")] = 40,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the search in --out (to --trials).")] = False,
     quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid per design.")] = False,
@@ -602,7 +610,20 @@ def design(
         )
     if trials < 1:
         raise UsageError(f"trials: expected an integer >= 1, got {trials}")
-    target = search_design.Target(camera=camera, side=side, yaw_deg=yaw_deg, quick=quick)
+    lenses = None
+    if focal_length_mm is not None:
+        lenses = tuple(parse_list("focal-length-mm", focal_length_mm, float))
+        if len(lenses) != 2 or not 0 < lenses[0] < lenses[1] <= 2000:
+            raise UsageError(
+                f"focal-length-mm: expected LOW,HIGH with 0 < LOW < HIGH <= 2000 mm, got {focal_length_mm}"
+            )
+        try:
+            from camera_models.lens_variant import lens_variant_text
+
+            lens_variant_text(camera, lenses[0])
+        except ValueError as exc:
+            raise UsageError(f"focal-length-mm: {exc}") from None
+    target = search_design.Target(camera=camera, side=side, yaw_deg=yaw_deg, quick=quick, focal_lengths_mm=lenses)
     budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
     run_on = execution(workers)
     check_render_cache()

@@ -81,6 +81,8 @@ def test_v2_and_v1_are_instances_of_the_parametric_beacon(tmp_path):
         (["--camera", "logitech-c270", "--max-span-mm", "20"], "max-span-mm"),
         (["--camera", "nope"], "camera"),
         (["--camera", "logitech-c270", "--trials", "0"], "trials"),
+        (["--camera", "logitech-c270", "--focal-length-mm", "4,12"], "focal-length-mm"),
+        (["--camera", "raspberry-pi-hq-6mm", "--focal-length-mm", "12,4"], "focal-length-mm"),
     ],
 )
 def test_bad_budgets_are_refused_in_one_line_before_any_work(monkeypatch, tmp_path, args, field):
@@ -90,3 +92,23 @@ def test_bad_budgets_are_refused_in_one_line_before_any_work(monkeypatch, tmp_pa
     code, _, err = invoke(["design", "--out", str(tmp_path / "o"), *args])
     assert_one_line_error(code, err, field)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_lens_variant_keeps_the_body_and_changes_only_the_focal_length(tmp_path):
+    from camera_models.camera import load_camera
+    from camera_models.lens_variant import lens_variant_text, register_lens_variant
+
+    try:
+        name = register_lens_variant("raspberry-pi-hq-6mm", 25.0, tmp_path)
+        variant, base = load_camera(name), load_camera("raspberry-pi-hq-6mm")
+        assert variant.geometry.focal_length_mm == 25.0 and base.geometry.focal_length_mm == 6.0
+        assert variant.geometry.width_px == base.geometry.width_px and variant.lens.f_number == base.lens.f_number
+        assert variant.sensor.full_well_e == base.sensor.full_well_e
+        with pytest.raises(ValueError, match=r"camera: logitech-c270 has a fixed lens"):
+            lens_variant_text("logitech-c270", 8.0)
+        with pytest.raises(ValueError, match=r"focal_length_mm: expected a focal length in \(0, 2000\] mm"):
+            lens_variant_text("raspberry-pi-hq-6mm", -3.0)
+        space = design.space_for(design.Target(camera="raspberry-pi-hq-6mm", focal_lengths_mm=(4.0, 35.0)))
+        assert space.names[-1] == "focal_length_mm" and design.space_for(design.Target(camera="x")) is design.SPACE
+    finally:
+        clear_user_hardware()
