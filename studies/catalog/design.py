@@ -233,6 +233,25 @@ def run(
     return summary
 
 
+COLUMNS = {
+    "trial": "design",
+    "far_limit_m": "far limit, m",
+    "side_power_mW": "power per side, mW",
+    "span_mm": "span, mm",
+    "arm_length_mm": "arms, mm",
+    "out_of_plane_mm": "centre out, mm",
+    "lit_face_diameter_mm": "lit face, mm",
+    "led_current_mA": "drive, mA",
+    "foam": "foam",
+    "paper_sheets": "sheets",
+}
+"""The report table's columns and their headers (``focal_length_mm`` added when the lens is searched)."""
+
+
+def _far(far_limit_m: float) -> str:
+    return f"{far_limit_m:.3g} m" if far_limit_m > 0 else "none (no range reaches P ≥ 0.95)"
+
+
 def _report(out: Path, summary: dict) -> None:
     t, b, v2 = summary["target"], summary["budget"], summary["v2_at_budget"]
     rep = Report(f"Design search: the beacon that reaches farthest with {t['camera']} at {t['yaw_deg']:g}°")
@@ -240,14 +259,14 @@ def _report(out: Path, summary: dict) -> None:
     lead = [
         f"{summary['evaluations']} designs evaluated ({summary['feasible']} within {b['side_power_mW']:g} mW per "
         f"side{span}); each a sequential range-limit run of the {t['side']} side.",
-        f"V2 as built at the same budget ({v2['design']['led_current_mA']:g} mA, foam + 1 sheet): far limit "
-        f"{v2['metrics']['far_limit_m']:.3g} m at {v2['metrics']['side_power_mW']:.3g} mW per side.",
+        f"V2 as built at the same budget ({v2['design']['led_current_mA']:.3g} mA, foam + 1 sheet): far limit "
+        f"{_far(v2['metrics']['far_limit_m'])} at {v2['metrics']['side_power_mW']:.3g} mW per side.",
     ]
     if summary["front"]:
         best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
         d, m = best["design"], best["metrics"]
         lead.append(
-            f"Farthest on the front: {m['far_limit_m']:.3g} m with {d['arm_length_mm']:.0f} mm arms, the centre "
+            f"Farthest on the front: {_far(m['far_limit_m'])} with {d['arm_length_mm']:.0f} mm arms, the centre "
             f"marker {d['out_of_plane_mm']:.0f} mm out, {d['lit_face_diameter_mm']:.0f} mm lit faces, "
             f"{d['led_current_mA']:.3g} mA, {'foam + ' if d['foam'] else ''}{d['paper_sheets']} sheets "
             f"({m['side_power_mW']:.3g} mW per side, {m['span_mm']:.0f} mm span)."
@@ -257,8 +276,13 @@ def _report(out: Path, summary: dict) -> None:
     rep.lead(lead)
     rows = [{**p["design"], **p["metrics"], "trial": p["trial"]} for p in summary["front"]]
     rows.append({**v2["design"], **v2["metrics"], "trial": "V2 as built"})
-    rep.table(pd.DataFrame(rows), "The Pareto front (far limit, power per side, span) and V2 at the same budget",
-              float_format="{:.3g}")  # fmt: skip
+    columns = {**COLUMNS, **({"focal_length_mm": "lens, mm"} if any("focal_length_mm" in r for r in rows) else {})}
+    rep.table(
+        pd.DataFrame(rows).reindex(columns=list(columns)),
+        "The Pareto front (far limit, power per side, span) and V2 at the same budget",
+        labels=columns,
+        float_format="{:.3g}",
+    )
     rep.text(
         f"Run time {summary['wall_s']:.0f} s; the far limit is the nominal point's (noise and pose only).", note=True
     )
