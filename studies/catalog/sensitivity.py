@@ -63,13 +63,7 @@ class Setting:
 
 def check(setting: Setting) -> None:
     """Refuse a setting no study could run, in one line naming the field (before any work)."""
-    StudyOptions(
-        cameras=(setting.camera,),
-        beacons=(setting.beacon,),
-        sides=(setting.side,),
-        yaws_deg=(float(setting.yaw_deg),),
-        currents_mA=(float(setting.led_current_mA),),
-    ).validate()
+    _options(setting).validate()
 
 
 def acting_space(setting: Setting, names: list[str]) -> tuple[InputSpace, dict[str, Unknown]]:
@@ -87,7 +81,7 @@ def acting_space(setting: Setting, names: list[str]) -> tuple[InputSpace, dict[s
     return InputSpace.from_unknowns(acting), acting
 
 
-def _options(setting: Setting, physics: tuple[dict, ...], source: str, quick: bool) -> StudyOptions:
+def _options(setting: Setting, physics: tuple[dict, ...] = (), source: str = "", quick: bool = True) -> StudyOptions:
     return StudyOptions(
         cameras=(setting.camera,),
         beacons=(setting.beacon,),
