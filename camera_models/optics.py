@@ -124,6 +124,13 @@ class RadialMapping:
             return r_c * (1.0 - k1 + k1 * x**2)
         raise ValueError(f"distortion.model: expected ptlens, poly3 or equidistant, got {lens.distortion_model!r}")
 
+    def horizontal_fov_deg(self) -> float:
+        """Full horizontal field of view through the lens (its mapping, not the pinhole's), degrees:
+        twice the field angle whose image falls on the frame's left and right edges."""
+        g = self.camera.geometry
+        r_u = float(self.undistorted_radius_px(np.array([0.5 * g.width_px]))[0])
+        return math.degrees(2 * math.atan(r_u / g.focal_length_px)) if math.isfinite(r_u) else 180.0
+
     def _table(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         g = self.camera.geometry
         r_max_d = 0.5 * math.hypot(g.width_px, g.height_px) * 1.6

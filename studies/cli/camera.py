@@ -1,4 +1,5 @@
-"""Camera commands: ``capture`` (what a camera saves) and ``emva1288`` (a photon-transfer data set)."""
+"""Camera commands: ``capture`` (what a camera saves), ``emva1288`` (a photon-transfer data set) and
+``ring`` (a ring of cameras' blind zone)."""
 
 from __future__ import annotations
 
@@ -14,9 +15,10 @@ from camera_models.capture import capture as run_capture
 from camera_models.capture import marker_core_saturation
 from camera_models.emva import EmvaSetup, green_qe, write_dataset
 from camera_models.exposure import manual_exposure
-from camera_models.optics import check_f_number
+from camera_models.optics import RadialMapping, check_f_number
 from pipeline.angles import Intrinsics
 from pipeline.detect import detect as run_detect
+from pipeline.ring import STUDY_BLIND_ZONE_M, blind_zone_m
 from scenes.background import render_background
 from scenes.render import render as render_scenario
 from scenes.render_cache import RenderCache, atomic_write_bytes
@@ -196,4 +198,40 @@ def capture(
         console.print(line, style="yellow", soft_wrap=True)
 
 
-COMMANDS = {"capture": capture, "emva1288": emva1288}
+def ring(
+    camera: opt.Camera = "spedal-920",
+    cameras_n: Annotated[int, typer.Option("--cameras-n", help="Cameras on the ring (the study: 6).")] = 6,
+    radius_m: Annotated[float, typer.Option("--radius-m", help="Ring radius, m (the study: 0.2).")] = 0.2,
+    json_out: opt.Json = False,
+) -> None:
+    """The blind zone of a ring of cameras facing outward (pipeline.ring), from the camera's lens, beside
+    the study's 507 mm for its hexagon of Spedal 920 webcams."""
+    if cameras_n < 2:
+        raise UsageError(f"cameras-n: expected an integer >= 2, got {cameras_n}")
+    if not radius_m > 0:
+        raise UsageError(f"radius-m: expected a ring radius > 0 m, got {radius_m:g}")
+    cam = load_camera(camera)
+    fov = RadialMapping(cam).horizontal_fov_deg()
+    pinhole = cam.geometry.horizontal_fov_deg
+    rho = blind_zone_m(cameras_n, radius_m, np.radians(min(fov, 179.9)))
+    record = {
+        "camera": camera,
+        "cameras": cameras_n,
+        "radius_m": radius_m,
+        "horizontal_fov_deg": fov,
+        "pinhole_horizontal_fov_deg": pinhole,
+        "blind_zone_m": None if not np.isfinite(rho) else rho,
+        "study_blind_zone_m": STUDY_BLIND_ZONE_M,
+    }
+    if json_out:
+        print(strict_json.dumps(record, indent=2))
+        return
+    reach = f"{rho * 1e3:.0f} mm" if np.isfinite(rho) else "unbounded (adjacent fields never meet)"
+    console.print(
+        f"{cameras_n} × {camera} on a {radius_m * 1e3:g} mm ring, {fov:.1f}° across each frame through its lens "
+        f"({pinhole:.1f}° as a pinhole): blind to {reach} from the centre; the study states "
+        f"{STUDY_BLIND_ZONE_M * 1e3:.0f} mm for its six Spedal 920 webcams"
+    )
+
+
+COMMANDS = {"capture": capture, "emva1288": emva1288, "ring": ring}
