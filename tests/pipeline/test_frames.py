@@ -129,6 +129,36 @@ def test_t1_t2_t3_chain_recovers_a_known_robot_pose():
     del intr
 
 
+@pytest.mark.parametrize("side", ["red", "green", "blue", "yellow"])
+@pytest.mark.parametrize("cam", range(6))
+def test_every_ring_camera_and_side_recovers_the_robots_global_pose(cam, side):
+    """Issue 28: a level robot placed so that ring camera ``cam`` sees ``side``'s target from 3 m at
+    an angle; noise-free lines of sight through the study's own pose solver and T1·T2·T3 give the
+    robot's position and heading in the beacon frame to 1e-9 (heading read off the robot's forward
+    axis, independently of global_pose's Euler convention)."""
+    design = beacon_design("v2")
+    turn = math.radians(-20.0 + 7.0 * cam)  # the camera's yaw off the target's normal
+    # the camera in the target frame T (x toward the viewer, z down): 3 m out, facing the target
+    z_cv = -np.array([math.cos(turn), math.sin(turn), 0.0])
+    y_cv = np.array([0.0, 0.0, 1.0])  # image down = target down: a level camera
+    t_from_cv = np.eye(4)
+    t_from_cv[:3, :3] = np.column_stack([np.cross(y_cv, z_cv), y_cv, z_cv])
+    t_from_cv[:3, 3] = [3.0 * math.cos(turn), 3.0 * math.sin(turn), -0.05]
+    beacon_from_robot = beacon_from_target(side, design.d_t_m) @ t_from_cv @ cv_from_robot(cam)
+    forward = beacon_from_robot[:3, :3] @ np.array([1.0, 0.0, 0.0])
+    heading = math.atan2(forward[1], forward[0])
+    pose = Pose(t_from_cv[:3, :3].T, invert(t_from_cv)[:3, 3])
+    p_cv = design.marker_positions_m() @ pose.cv_from_t.T + pose.t_cv_m
+    assert np.all(p_cv[:, 2] > 0)  # every marker in front of the camera
+    solved = thesis_pose_from_vectors(cv_to_study(p_cv / np.linalg.norm(p_cv, axis=1, keepdims=True)), design)
+    assert solved.pose is not None and all(solved.converged)
+    for estimate in (pose, solved.pose):
+        g = global_pose(side, estimate, design.d_t_m, camera_index=cam)
+        assert np.allclose([g.x_m, g.y_m, g.z_m], beacon_from_robot[:3, 3], atol=1e-9)
+        assert abs(math.remainder(g.yaw_rad - heading, 2 * math.pi)) < 1e-9
+        assert abs(g.pitch_rad) < 1e-9 and abs(g.roll_rad) < 1e-9
+
+
 @pytest.mark.parametrize("yaw", [0.0, 15.0, 30.0])
 def test_thesis_pose_from_led_points_on_exact_angles(yaw):
     """LEDPoints built from exact lines of sight (as (α, β) with r = study formula) give the true pose."""
