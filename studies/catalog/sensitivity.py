@@ -177,7 +177,7 @@ def run(
 def _report(out: Path, summary: dict) -> None:
     s = summary["setting"]
     rep = Report(f"Which unknown to measure first: {s['camera']}, {s['beacon']} {s['side']} side, {s['yaw_deg']:g}°")
-    lead = [f"{summary['points']} points of the unknowns ({summary['source']}), each a sequential range-limit run."]
+    lead = [f"At {summary['source']}: each point a sequential range-limit run."]
     for a in summary["analyses"].values():
         lead += a["sentences"][:2]
     if summary["censored_far_limits"]:
@@ -187,7 +187,7 @@ def _report(out: Path, summary: dict) -> None:
         )
     rep.lead(lead)
     for a in summary["analyses"].values():
-        rep.heading(a["output"])
+        rep.heading(a["output"][0].upper() + a["output"][1:])
         for sentence in a["sentences"]:
             rep.text(sentence)
         if "sobol" in a:
