@@ -1,4 +1,5 @@
-"""The camera ring's coverage: where around the robot no camera of the ring sees (its blind zone).
+"""The camera ring: where around the robot no camera sees (its blind zone), and one instant's
+detections by its cameras fused into one pose.
 
 The source study's ring (docs/source-study.md §4.7, §8): N cameras on a circle of radius r about
 the robot's centre, each facing straight outward, adjacent ones 2π/N apart (the study's six
@@ -14,6 +15,12 @@ than ρ may be seen by none. The field φ must be the lens's (its radial mapping
 :meth:`camera_models.optics.RadialMapping.horizontal_fov_deg`), not the pinhole's: a wide-angle
 webcam's barrel distortion widens it. The study states a blind zone to 507 mm for its hexagon.
 
+At one instant several cameras may see beacons, each detection giving the robot's pose in the
+beacon frame with a covariance (:class:`PlanarPose`: position and heading in the horizontal
+plane). :func:`fuse` combines them by their information (the best linear unbiased estimate of
+independent estimates: P⁻¹ = Σ Pᵢ⁻¹, x = P Σ Pᵢ⁻¹ xᵢ, headings unwrapped about the most certain
+one), so the fused covariance is never larger than any single one's.
+
 Example
 -------
 >>> round(blind_zone_m(6, 0.2, math.radians(120.0)), 4)
@@ -23,10 +30,13 @@ Example
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["STUDY_BLIND_ZONE_M", "blind_zone_m", "seen_by_ring"]
+__all__ = ["STUDY_BLIND_ZONE_M", "PlanarPose", "blind_zone_m", "fuse", "seen_by_ring"]
 
 STUDY_BLIND_ZONE_M = 0.507
 """The blind zone the study states for its hexagon of Spedal 920 webcams, m (docs/source-study.md §4.7)."""
@@ -64,3 +74,52 @@ def seen_by_ring(points_xy: np.ndarray, n_cameras: int, radius_m: float, fov_rad
         across = d @ np.array([-axis[1], axis[0]])
         seen |= (along > 0) & (np.abs(np.arctan2(across, along)) <= fov_rad / 2)
     return seen
+
+
+@dataclass(frozen=True)
+class PlanarPose:
+    """A robot pose estimate in the beacon frame's horizontal plane.
+
+    Attributes
+    ----------
+    x_m, y_m
+        Position, m.
+    heading_rad
+        Heading about the vertical, rad.
+    covariance
+        3×3 covariance of (x, y, heading), m² and rad² (symmetric positive definite).
+    """
+
+    x_m: float
+    y_m: float
+    heading_rad: float
+    covariance: NDArray[np.float64]
+
+    @property
+    def vector(self) -> NDArray[np.float64]:
+        """(x, y, heading)."""
+        return np.array([self.x_m, self.y_m, self.heading_rad])
+
+
+def fuse(estimates: Sequence[PlanarPose]) -> PlanarPose:
+    """The information-weighted fusion of independent estimates of one pose (module docstring); the
+    heading is returned in (−π, π]. ValueError, one line, without estimates or with a covariance that
+    is not symmetric positive definite."""
+    if not estimates:
+        raise ValueError("estimates: expected at least one pose estimate")
+    info = []
+    for i, e in enumerate(estimates):
+        c = np.asarray(e.covariance, dtype=float)
+        if c.shape != (3, 3) or not np.allclose(c, c.T) or np.linalg.eigvalsh(c).min() <= 0:
+            raise ValueError(f"estimates[{i}].covariance: expected a symmetric positive definite 3×3 matrix")
+        info.append(np.linalg.inv(c))
+    anchor = estimates[int(np.argmax([np.linalg.det(m) for m in info]))].heading_rad  # the most certain
+    total = np.sum(info, axis=0)
+    weighted = np.zeros(3)
+    for e, m in zip(estimates, info, strict=True):
+        v = e.vector
+        v[2] = anchor + math.remainder(v[2] - anchor, 2 * math.pi)  # unwrapped about the anchor
+        weighted += m @ v
+    covariance = np.linalg.inv(total)
+    x, y, heading = covariance @ weighted
+    return PlanarPose(float(x), float(y), math.remainder(float(heading), 2 * math.pi), (covariance + covariance.T) / 2)

@@ -58,3 +58,49 @@ def test_the_ring_command_states_the_blind_zone_beside_the_studys():
     assert json.loads(out)["blind_zone_m"] is None
     code, _, err = invoke(["ring", "--cameras-n", "1"])
     assert_one_line_error(code, err, "cameras-n")
+
+
+def _random_covariance(rng, scale):
+    a = rng.normal(size=(3, 3)) * np.array([scale, scale, 0.02])
+    return a @ a.T + np.diag([1e-4, 1e-4, 1e-6])
+
+
+def test_the_fused_pose_is_never_worse_than_the_best_single_detection():
+    """Synthetic detections of one instant (three cameras, covariances of different sizes and shapes),
+    errors drawn from those covariances: the fused covariance lies below every single one (Loewner
+    order), the fused errors scatter as it says, and their mean squared error is below the best single
+    detection's on the same draws."""
+    from pipeline.ring import PlanarPose, fuse
+
+    rng = np.random.default_rng(28)
+    truth = np.array([4.0, -1.5, math.radians(170.0)])
+    covs = [_random_covariance(rng, s) for s in (0.05, 0.12, 0.3)]
+    fused_cov = fuse([PlanarPose(*truth, c) for c in covs]).covariance
+    for c in covs:
+        assert np.linalg.eigvalsh(c - fused_cov).min() > -1e-12
+    errors, singles = [], []
+    for _ in range(4000):
+        draws = [truth + rng.multivariate_normal(np.zeros(3), c) for c in covs]
+        f = fuse([PlanarPose(*d, c) for d, c in zip(draws, covs, strict=True)])
+        e = f.vector - truth
+        e[2] = math.remainder(e[2], 2 * math.pi)
+        errors.append(e)
+        singles.append([np.sum((d[:2] - truth[:2]) ** 2) for d in draws])
+    errors = np.array(errors)
+    scale = np.sqrt(np.outer(np.diag(fused_cov), np.diag(fused_cov)))  # each entry against its own variances
+    assert np.all(np.abs(np.cov(errors.T) - fused_cov) <= 0.1 * scale)  # it scatters as its covariance says
+    best = min(np.mean(np.array(singles), axis=0))  # the best single camera's mean squared position error
+    assert np.mean(np.sum(errors[:, :2] ** 2, axis=1)) < best
+
+
+def test_headings_either_side_of_pi_fuse_to_pi_not_zero():
+    from pipeline.ring import PlanarPose, fuse
+
+    c = np.diag([0.01, 0.01, 0.001])
+    f = fuse([PlanarPose(0.0, 0.0, math.radians(179.0), c), PlanarPose(0.0, 0.0, math.radians(-179.0), c)])
+    assert abs(abs(f.heading_rad) - math.pi) < 1e-12
+    assert np.allclose(f.covariance, c / 2)
+    with pytest.raises(ValueError, match=r"estimates\[0\]\.covariance: expected a symmetric positive definite"):
+        fuse([PlanarPose(0.0, 0.0, 0.0, -c)])
+    with pytest.raises(ValueError, match=r"estimates: expected at least one"):
+        fuse([])
