@@ -68,9 +68,12 @@ def test_without_diffusers_the_marker_is_the_bare_led(tmp_path):
     assert 0.95 * _led_flux_per_W_sr() < e.exit_flux_per_W_sr() <= 1.01 * _led_flux_per_W_sr()
 
 
-def test_second_sweep_over_drive_and_paper_renders_no_near_field(tmp_path):
+def test_second_sweep_over_drive_and_paper_renders_no_near_field(tmp_path, monkeypatch):
     from scenes.marker_photometry import marker_figures
     from scenes.scenario import RenderSettings, Scenario
+
+    # a cache of its own: another test of this worker may have made one of these near fields already
+    monkeypatch.setenv("BEACON_SIM_CACHE", str(tmp_path / "render-cache"))
 
     settings = RenderSettings(near_field_spp=64)
 
