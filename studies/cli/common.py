@@ -200,3 +200,14 @@ def print_table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]
     for r in rows:
         table.add_row(*r)
     Console().print(table)
+
+
+def physics_source(physics_from: str) -> Path | None:
+    """``--physics-from`` as a file (``calibration``: the project's own set) or None (``registry``); a
+    UsageError naming the option when it names no file."""
+    from studies.catalog import prediction_set  # the catalog is imported by the commands that use it
+
+    source = {"registry": None, "calibration": prediction_set.reference_set()}.get(physics_from, Path(physics_from))
+    if source is not None and not source.is_file():
+        raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
+    return source

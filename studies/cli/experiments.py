@@ -32,6 +32,7 @@ from studies.cli.common import (
     execution,
     out_path,
     parse_list,
+    physics_source,
     print_table,
     rich_progress,
 )
@@ -539,9 +540,7 @@ def sensitivity(
         raise UsageError(f"points: expected an integer >= 8 (an emulator needs several runs), got {points}")
     if not 0 <= yaw_deg <= 90:
         raise UsageError(f"yaw-deg: expected an angle in [0, 90], got {yaw_deg:g}")
-    source = {"registry": None, "calibration": prediction_set.reference_set()}.get(physics_from, Path(physics_from))
-    if source is not None and not source.is_file():
-        raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
+    source = physics_source(physics_from)
     setting = analysis.Setting(camera=camera, beacon=beacon, side=side, led_current_mA=led_current_ma, yaw_deg=yaw_deg)
     try:
         analysis.check(setting)

@@ -13,7 +13,7 @@ from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, PHYSICS, SEQUENTIAL, STU
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.cli import options as opt
-from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list
+from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, physics_source
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine.report import page_context
 from studies.engine.run_log import timed_part
@@ -82,9 +82,7 @@ def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...])
     refused = [n for n in names if n not in PHYSICS]
     if refused:
         raise UsageError(f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}), got {refused[0]}")
-    source = {"registry": None, "calibration": prediction_set.reference_set()}.get(physics_from, Path(physics_from))
-    if source is not None and not source.is_file():
-        raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
+    source = physics_source(physics_from)
     try:
         return prediction_set.physics_points(uncertainty, calibration=source)
     except ValueError as e:
