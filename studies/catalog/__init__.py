@@ -25,9 +25,13 @@ SEQUENTIAL: dict[str, ModuleType] = {m.NAME: m for m in (webcam_vs_dslr, range_l
 (:mod:`studies.engine.sequential`): they have ``default_design(quick)`` and take
 ``run(..., design=...)``."""
 
-PHYSICS: dict[str, ModuleType] = {m.NAME: m for m in (range_limit,)}
+PHYSICS: dict[str, ModuleType] = {m.NAME: m for m in (range_limit, webcam_vs_dslr, brightness_diffuser)}
 """Studies that state noise + physics intervals beside their noise ones (``--uncertainty``,
-:attr:`studies.engine.tasks.StudyOptions.physics`)."""
+:attr:`studies.engine.tasks.StudyOptions.physics`): range-limit and webcam-vs-dslr their far limits
+(and webcam-vs-dslr the closest pair's colour separability), brightness-diffuser its recommended
+settings' P(correct) and how often they stay in the window. ``replication`` is left out: it
+re-runs the source study's own configurations (a reproduction, not a prediction), and its full
+grid is already ~50 h of frames before N + 1 repeats."""
 
 MAIN_JOB_DESIGNS = ("range-limit",)
 """The studies of :data:`MAIN_JOB` that place their frames by their quick sequential design:

@@ -29,6 +29,7 @@ from studies.engine.report import Report
 from studies.engine.scoring import detection_success
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tasks import StudyOptions, grid_conditions
+from studies.engine.uncertainty import nominal_rows, physics_interval, physics_note, point_rows
 
 NAME = "brightness-diffuser"
 FULL_DIFFUSERS = tuple(
@@ -70,8 +71,12 @@ def run(out: Path, options: StudyOptions, execution: Execution = Execution()) ->
 
 def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
     """summary.json and report.html of a finished sweep's results table; returns the summary."""
-    table = configuration_table(frame)
+    table = configuration_table(nominal_rows(frame))
     summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
+    at_points = point_rows(frame)
+    if len(at_points):
+        add_physics(summary["recommended"], {int(i): configuration_table(g) for i, g in at_points.groupby("point")})
+        summary["physics"] = {"points": len(options.physics), "source": options.physics_source}
     _report(Path(out), options, table, summary)
     atomic_write_bytes(Path(out) / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
@@ -167,6 +172,34 @@ def recommend(table) -> list[dict]:
     return out
 
 
+def add_physics(recommended: list[dict], tables: dict[int, pd.DataFrame]) -> None:
+    """Give each recommended setting its noise + physics evidence, from the configuration tables
+    at the points of the unknowns (point → :func:`configuration_table` of its rows): ``p_physics``
+    and ``p_interval_physics``, the interval of its lowest P(correct) over the ranges
+    (:func:`studies.engine.uncertainty.physics_interval`), and ``window_points``, at how many
+    points it stays in the operating window."""
+    config = ("led_current_mA", "foam", "paper_sheets", "paper_colour")
+    for rec in recommended:
+        if rec.get("window") == "empty":
+            continue
+        p, inside = [], 0
+        for table in tables.values():
+            sel = table[(table.tracker == "best") & (table.camera == rec["camera"]) & (table.side == rec["side"])]
+            for c in config:
+                sel = sel[sel[c] == rec[c]]
+            if sel.empty:
+                continue
+            p.append(float(sel.p_detect.min()))
+            inside += bool(sel.in_window.all())
+        if p:
+            iv = physics_interval(p)
+            rec.update(
+                p_physics=iv.to_dict(),
+                p_interval_physics=f"{iv.low:.2f} to {iv.high:.2f} ({100 * iv.rate:.0f} %, {iv.points} points)",
+                window_points=f"{inside} of {len(p)}",
+            )
+
+
 def recommendation_text(rec: dict) -> str:
     """A ``recommended`` record in words."""
     if rec.get("window") == "empty":
@@ -176,6 +209,12 @@ def recommendation_text(rec: dict) -> str:
         f"{rec['side_power_mW']:.2g} mW for the side; {rec['successes']} of {rec['frames']} frames correct "
         f"(lowest Wilson 95 % bound {rec['p_low']:.2f}), cores {100 * rec['core_saturation']:.0f} % clipped; "
         f"{rec['window']} in the window"
+        + (
+            f"; with the unknowns (noise + physics) lowest P(correct) {rec['p_interval_physics']}, in the window at "
+            f"{rec['window_points']} points"
+            if rec.get("p_interval_physics")
+            else ""
+        )
     )
 
 
@@ -193,7 +232,7 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
         "(P ≥ 0.95) at face value; with so few frames its Wilson lower bound is far below 0.95, so it ranks "
         "settings rather than proving them."
     )
-    rep.lead(lines)
+    rep.lead([*lines, *physics_note(summary)])
     rep.text(
         f"Cameras {', '.join(options.cameras)}; sides {', '.join(options.sides)}; ranges "
         f"{', '.join(f'{r:g}' for r in options.ranges_m)} m; LED drive "

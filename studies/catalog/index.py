@@ -451,6 +451,8 @@ def _colour_lines(wv: dict, cam: str, current: float | None) -> tuple[list[str],
         f"webcam-vs-dslr: {_sides_text(sides) if sides else 'sides not recorded'}, {sep['led_current_mA']:g} mA, "
         f"{sep.get('frames', '?')} frames",
     ]
+    if sep.get("separability_interval_physics"):
+        lines.insert(1, f"with the unknowns (noise + physics): closest pair {sep['separability_interval_physics']}")
     return lines, sep
 
 

@@ -35,7 +35,15 @@ from studies.engine.sequential import SequentialDesign, decision_text, design_ev
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import pose_outcomes, write_tables
 from studies.engine.tasks import StudyOptions, grid_conditions
-from studies.engine.uncertainty import physics_interval
+from studies.engine.uncertainty import (
+    far_limits_at_points,
+    interval_text,
+    nominal_rows,
+    over_points,
+    physics_interval,
+    physics_note,
+    point_rows,
+)
 
 NAME = "range-limit"
 PLANNED_RANGE_M = 10.0
@@ -112,9 +120,7 @@ def run(
     if design is None:
         frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
         return write_outputs(out, options, frame)
-    fields = UNIT_FIELDS + ((("point", "point"),) if options.physics else ())  # each point a unit of its own
-    if options.physics and design.budget_frames is not None:  # a budget is the nominal grid's: each point repeats it
-        design = design.with_overrides(budget_frames=design.budget_frames * (len(options.physics) + 1))
+    fields, design = over_points(UNIT_FIELDS, design, len(options.physics))
     result = run_design(NAME, options, design, out, fields, estimators=["best"], execution=execution)
     return write_outputs(out, options, write_tables(out, result.rows), result.summary())
 
@@ -149,8 +155,7 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     record says how many frames decided its limits (``decision``; ``far_decided``,
     ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
-    at_points = frame[frame["point"].notna()] if "point" in frame else frame.iloc[:0]
-    physics = _physics_limits(at_points)
+    physics = far_limits_at_points(point_rows(frame), GROUP)
     frame = nominal_rows(frame)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
@@ -173,7 +178,7 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
         )
         if key in physics:
             iv = physics_interval(physics[key])
-            rec.update(far_physics=iv.to_dict(), far_interval_physics=physics_interval_text(iv))
+            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv))
         if design is not None:
             unit = units.get((cam, beacon, side, float(current), float(yaw)) + ((None,) if physics else ()))
             rec.update(
@@ -198,30 +203,6 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     if design is not None:
         summary["design"] = design
     return summary
-
-
-def nominal_rows(frame: pd.DataFrame) -> pd.DataFrame:
-    """The rows of the nominal point (a run with ``--uncertainty`` also holds rows at its points)."""
-    return frame[frame["point"].isna()] if "point" in frame else frame
-
-
-def _physics_limits(rows: pd.DataFrame) -> dict[tuple, list[float]]:
-    """Per :data:`GROUP` key, the far limit at each point of the unknowns (m; ∞ for "≥ the farthest
-    range tried", 0 where no range works)."""
-    out: dict[tuple, list[float]] = {}
-    if rows.empty:
-        return out
-    for key, g in rows.groupby([*GROUP, "point"], sort=True):
-        mr = estimate_max_range(g.to_dict("records"))
-        limit = math.inf if mr.at_least else max(float(mr.max_range_m), 0.0)
-        out.setdefault(tuple(key[:-1]), []).append(limit)
-    return out
-
-
-def physics_interval_text(iv) -> str:
-    """ "3.1 to ≥ 20 m (88 %, 16 points)": a :class:`studies.engine.uncertainty.PhysicsInterval`."""
-    high = "≥ the farthest tried" if math.isinf(iv.high) else f"{iv.high:.3g}"
-    return f"{iv.low:.3g} to {high} m ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 
 def lead_lines(summary: dict) -> list[str]:
@@ -269,7 +250,7 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
     import matplotlib.pyplot as plt
 
     rep = Report("Range limit: how far each camera localises the beacon, versus yaw")
-    rep.lead([*lead_lines(summary), _evidence_note(summary), *_physics_note(summary)])
+    rep.lead([*lead_lines(summary), _evidence_note(summary), *physics_note(summary)])
     rep.text(
         f"Cameras {', '.join(options.cameras)}; beacons {', '.join(options.beacons)}; sides "
         f"{', '.join(options.sides)}; LED drive {', '.join(f'{c:g}' for c in options.currents_mA)} mA; yaw "
@@ -363,19 +344,6 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
                 css_class="keys",
             )
     rep.write(out / "report.html")
-
-
-def _physics_note(summary: dict) -> list[str]:
-    """What the noise + physics intervals rest on, when the run states them."""
-    physics = summary.get("physics")
-    if not physics:
-        return []
-    return [
-        f"Noise + physics: each condition also ran at {physics['source']}. The far limit's noise + physics "
-        "interval lies between the k-th smallest and k-th largest of those points' limits, a predictive interval "
-        "for hardware drawn from the same set at the rate it states (studies/engine/uncertainty.py); the 95 % "
-        "interval beside it is the noise and pose of the nominal point alone."
-    ]
 
 
 def _design_words(summary: dict) -> str:

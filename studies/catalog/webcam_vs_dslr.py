@@ -43,6 +43,16 @@ from studies.engine.sequential import SequentialDesign, decision_text, design_ev
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import detection_curve, write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
+from studies.engine.uncertainty import (
+    far_limits_at_points,
+    interval_text,
+    nominal_rows,
+    over_points,
+    physics_interval,
+    physics_note,
+    point_rows,
+    values_at_points,
+)
 
 NAME = "webcam-vs-dslr"
 ALL_CAMERAS = ("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm")
@@ -107,7 +117,8 @@ def run(
         frame = sweep(NAME, grid_conditions(options), options, out, execution=execution)
         mosaic_png(options, out)
         return write_outputs(out, options, frame)
-    result = run_design(NAME, options, design, out, UNIT_FIELDS, execution=execution)
+    fields, design = over_points(UNIT_FIELDS, design, len(options.physics))
+    result = run_design(NAME, options, design, out, fields, execution=execution)
     frame = write_tables(out, result.rows)
     mosaic_png(options, out)
     return write_outputs(out, options, frame, result.summary())
@@ -120,8 +131,10 @@ def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, design:
     design placed the frames."""
     out = Path(out)
     summary = analyse(frame, design)
+    if options.physics:
+        summary["physics"] = {"points": len(options.physics), "source": options.physics_source}
     mosaic = (out / "mosaic.png").read_bytes() if (out / "mosaic.png").is_file() else None
-    _report(out, options, frame, summary, mosaic)
+    _report(out, options, nominal_rows(frame), summary, mosaic)
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
 
@@ -140,15 +153,25 @@ def analyse(frame, design: dict | None = None) -> dict:
       then by that fraction and that drive's colour separability; ``tied_on_range`` names the
       cameras whose far limits are equal;
     * ``yaws_deg``: the yaws swept (every record pools them);
+    * with rows at points of the unknowns (``--uncertainty``; every other number is the nominal
+      point's): ``far_physics``/``far_interval_physics`` on each ``max_range`` record and
+      ``separability_physics``/``separability_interval_physics`` (the closest pair's d at each
+      point, :func:`studies.engine.uncertainty.physics_interval`) on each ``colour_separability``
+      record, both carried into ``ranking``;
     * ``design`` (with a sequential ``design``, its summary): then each ``max_range`` record
       says how many frames decided it (``decision``, ``far_decided``, ``near_decided``,
       ``design_stop``: the best tracker's, which placed the frames).
     """
     summary: dict = {"study": NAME, "max_range": [], "colour_separability": [], "ranking": []}
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
+    at_points = point_rows(frame)
+    frame = nominal_rows(frame)
+    keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
+    far_physics = far_limits_at_points(at_points[at_points.estimator == "best"], keys) if len(at_points) else {}
+    seen = at_points[(at_points.tracker == "best") & (at_points.estimator == "best")] if len(at_points) else at_points
+    sep_physics = values_at_points(seen, ["camera", "led_current_mA"], _closest_pair)
     if "nominal_yaw_deg" in frame:
         summary["yaws_deg"] = sorted(float(y) for y in set(frame.nominal_yaw_deg))
-    keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
     for key, g in frame[frame.estimator == "best"].groupby(keys):
         rec = {**dict(zip(keys, key, strict=True)), **estimate_max_range(g.to_dict("records")).to_dict()}
         rec.update(
@@ -157,6 +180,9 @@ def analyse(frame, design: dict | None = None) -> dict:
             far_interval=far_interval_text(rec),
             failures_nearer=near_failures_text(rec),
         )
+        if key in far_physics:
+            iv = physics_interval(far_physics[key])
+            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv))
         if design is not None:
             unit = units.get((rec["camera"], rec["beacon"], rec["environment"], float(rec["led_current_mA"])))
             rec.update(
@@ -180,6 +206,11 @@ def analyse(frame, design: dict | None = None) -> dict:
                 "confused": confusions(detected),
             }
         )
+        if (camera, current) in sep_physics:
+            iv = physics_interval(sep_physics[(camera, current)])
+            summary["colour_separability"][-1].update(
+                separability_physics=iv.to_dict(), separability_interval_physics=separability_interval_text(iv)
+            )
     best: dict[str, dict] = {}
     for rec in summary["max_range"]:
         if rec["tracker"] != "best":
@@ -195,6 +226,14 @@ def analyse(frame, design: dict | None = None) -> dict:
         # the drive that works best: the farthest limit, then the most frames correct, then separability
         reach, correct = works_best_key(rec)
         cand = {"reach": reach, "correct": correct, "sep": sep if sep is not None and not math.isnan(sep) else 0.0}
+        cand["sep_physics"] = next(
+            (
+                s.get("separability_interval_physics")
+                for s in summary["colour_separability"]
+                if s["camera"] == rec["camera"] and s["led_current_mA"] == rec["led_current_mA"]
+            ),
+            None,
+        )
         cand["rec"] = rec
         old = best.get(rec["camera"])
         if old is None or (reach, correct, cand["sep"]) > (old["reach"], old["correct"], old["sep"]):
@@ -218,6 +257,8 @@ def analyse(frame, design: dict | None = None) -> dict:
                 "beacon": rec["beacon"],
                 "min_colour_mahalanobis": best[c]["sep"],
                 "tied_on_range": tied,
+                **({"far_interval_physics": rec["far_interval_physics"]} if "far_interval_physics" in rec else {}),
+                **({"separability_interval_physics": best[c]["sep_physics"]} if best[c]["sep_physics"] else {}),
             }
         )
     if design is not None:
@@ -267,6 +308,22 @@ def colour_separability(frames) -> dict:
         "no_overlap": bool(m) and min(m) == math.inf,
         "mean_srgb": {k: v.tolist() for k, v in means.items()},
     }
+
+
+def _closest_pair(frames) -> float:
+    """The closest pair's Mahalanobis distance of one point's frames (inf: no overlap; NaN: fewer
+    than two sides seen, a point left out of the interval)."""
+    d = colour_separability(frames)["min_mahalanobis"]
+    return math.nan if d is None else float(d)
+
+
+def separability_interval_text(iv) -> str:
+    """The closest pair's distance over the points in words: "d 4.1 to 9.3 (88 %, 16 points)", an
+    end at ∞ read "no overlap"."""
+    low = "no overlap" if math.isinf(iv.low) else f"{iv.low:.3g}"
+    high = "no overlap" if math.isinf(iv.high) else f"{iv.high:.3g}"
+    span = low if iv.low == iv.high else f"{low} to {high}"
+    return f"d {span} ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 
 def confusions(detected) -> list[dict]:
@@ -413,9 +470,19 @@ def lead_lines(summary: dict) -> list[str]:
         lines.append(
             f"{r['rank']}. {r['camera']} at {r['at_led_current_mA']:g} mA ({r['beacon'].upper()}, {r['environment']}): "
             f"works {r['working_range']} (far limit 95 % interval {r['far_interval']}; {r['correct']} frames "
-            f"correct); colour separability {colour}."
+            f"correct); colour separability {colour}." + _physics_words(r)
         )
     return lines
+
+
+def _physics_words(r: dict) -> str:
+    """A ranking record's noise + physics intervals in a sentence ("" without ``--uncertainty``)."""
+    parts = [
+        f"{label} {r[key]}"
+        for key, label in (("far_interval_physics", "far limit"), ("separability_interval_physics", "closest pair"))
+        if r.get(key)
+    ]
+    return f" With the unknowns (noise + physics): {'; '.join(parts)}." if parts else ""
 
 
 def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: bytes | None) -> None:
@@ -438,6 +505,7 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
             *lead_lines(summary),
             f"{evidence} An interval from 0 m means the frames cannot exclude that no range reaches P ≥ 0.95; "
             "'≥' means no fall-off up to the farthest range tried.",
+            *physics_note(summary),
         ]
     )
     currents = sorted(set(frame.led_current_mA))
@@ -453,24 +521,17 @@ def _report(out: Path, options: StudyOptions, frame, summary: dict, mosaic: byte
     ranking = pd.DataFrame(summary["ranking"])
     if not ranking.empty:
         ranking = ranking.assign(tied_on_range=[", ".join(t) or "–" for t in ranking.tied_on_range])
+        columns = ["rank", "camera", "far_limit", "far_interval", "far_interval_physics", "at_led_current_mA"]
+        columns += ["correct", "min_colour_mahalanobis", "separability_interval_physics", "tied_on_range"]
         rep.table(
-            ranking[
-                [
-                    "rank",
-                    "camera",
-                    "far_limit",
-                    "far_interval",
-                    "at_led_current_mA",
-                    "correct",
-                    "min_colour_mahalanobis",
-                    "tied_on_range",
-                ]
-            ],
+            ranking[[c for c in columns if c in ranking]],
             "Cameras by far limit (best tracker, at the drive that works best for each: farthest limit, then most "
             "frames correct), then colour separability",
             labels={
                 "far_limit": "far limit",
                 "far_interval": "far limit, 95 % interval",
+                "far_interval_physics": "far limit, noise + physics",
+                "separability_interval_physics": "closest pair, noise + physics",
                 "at_led_current_mA": "at LED drive, mA",
                 "correct": "frames correct at that drive",
                 "min_colour_mahalanobis": "colour separability (closest pair, Mahalanobis d)",

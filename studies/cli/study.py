@@ -81,7 +81,10 @@ def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...])
         raise UsageError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {uncertainty}")
     refused = [n for n in names if n not in PHYSICS]
     if refused:
-        raise UsageError(f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}), got {refused[0]}")
+        raise UsageError(
+            f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}; replication re-runs the source "
+            f"study's own configurations), got {refused[0]}"
+        )
     source = physics_source(physics_from)
     try:
         return prediction_set.physics_points(uncertainty, calibration=source)
@@ -124,8 +127,8 @@ def study(
 
     With --target-width-m, --target-relative or --budget-frames (range-limit, webcam-vs-dslr)
     its ranges are the start of a sequential design that adds frames where the range limits
-    are undecided (design.json). With --uncertainty N (range-limit) it also runs at N points of
-    the unknowns and states each limit's noise + physics interval beside its noise one."""
+    are undecided (design.json). With --uncertainty N (every study but replication) it also runs at
+    N points of the unknowns and states its answers' noise + physics intervals beside the noise ones."""
     if name not in STUDIES:
         raise UsageError(f"study: expected one of {', '.join(STUDIES)}, got {name!r}")
     module = STUDIES[name]
@@ -213,8 +216,9 @@ def main_job(
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults; range-limit places
     its frames by its sequential design (--target-width-m, --target-relative, --budget-frames)
-    and, with --uncertainty N, states its far limits' noise + physics intervals too."""
-    physics, source = _physics(uncertainty, physics_from, ("range-limit",))
+    and, with --uncertainty N, every study also runs at N points of the unknowns and states its
+    answers' noise + physics intervals (far limits, colour separability, the LED setting's P)."""
+    physics, source = _physics(uncertainty, physics_from, MAIN_JOB)
     settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
     designs = {
         n: _checked(SEQUENTIAL[n].default_design(True).with_overrides(**settings), SEQUENTIAL[n].default_options(True))

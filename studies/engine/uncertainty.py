@@ -25,12 +25,26 @@ Example
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
-__all__ = ["PhysicsInterval", "order_for", "physics_interval"]
+from studies.engine.max_range import estimate_max_range
+
+__all__ = [
+    "PhysicsInterval",
+    "far_limits_at_points",
+    "interval_text",
+    "nominal_rows",
+    "order_for",
+    "over_points",
+    "physics_interval",
+    "physics_note",
+    "point_rows",
+    "values_at_points",
+]
 
 
 @dataclass(frozen=True)
@@ -103,3 +117,88 @@ def physics_interval(limits: Sequence[float], *, rate: float = 0.95) -> PhysicsI
     ranked = np.sort(x)
     return PhysicsInterval(low=float(ranked[k - 1]), high=float(ranked[n - k]), rate=1 - 2 * k / (n + 1),
                            points=n, order=k)  # fmt: skip
+
+
+def nominal_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows of the nominal point (a run with ``--uncertainty`` also holds rows tagged ``point``)."""
+    return frame[frame["point"].isna()] if "point" in frame else frame
+
+
+def point_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows run at points of the unknowns (none without ``--uncertainty``)."""
+    return frame[frame["point"].notna()] if "point" in frame else frame.iloc[:0]
+
+
+def values_at_points(
+    rows: pd.DataFrame, group: list[str], value: Callable[[pd.DataFrame], float]
+) -> dict[tuple, list[float]]:
+    """Per ``group`` key, ``value`` of that key's rows at each point of the unknowns, in point order;
+    a point where ``value`` is NaN (nothing to measure there) is left out.
+
+    Parameters
+    ----------
+    rows
+        Results rows run at points (:func:`point_rows`), with a ``point`` column.
+    group
+        The columns of one estimate (a study's unit and tracker).
+    value
+        The estimate from one key's rows at one point (a far limit, m; a separability; a probability).
+    """
+    out: dict[tuple, list[float]] = {}
+    if rows.empty:
+        return out
+    for key, g in rows.groupby([*group, "point"], sort=True):
+        v = float(value(g))
+        if not math.isnan(v):
+            out.setdefault(tuple(key[:-1]), []).append(v)
+    return out
+
+
+def far_limits_at_points(rows: pd.DataFrame, group: list[str]) -> dict[tuple, list[float]]:
+    """Per ``group`` key, the far limit at each point of the unknowns (m; ∞ for "≥ the farthest range
+    tried", 0 where no range works): :func:`studies.engine.max_range.estimate_max_range` of its rows."""
+
+    def far(g: pd.DataFrame) -> float:
+        mr = estimate_max_range(g.to_dict("records"))
+        return math.inf if mr.at_least else max(float(mr.max_range_m), 0.0)
+
+    return values_at_points(rows, group, far)
+
+
+def interval_text(iv: PhysicsInterval, *, unit: str = " m", at_least: str = "≥ the farthest tried") -> str:
+    """A noise + physics interval in words, "3.1 to 6 m (88 %, 16 points)"; ``unit`` follows the
+    numbers, ``at_least`` stands for a censored upper end ("3.1 to ≥ the farthest tried m").
+
+    Examples
+    --------
+    >>> interval_text(physics_interval([3.1, 6.0, 4.0]))
+    '3.1 to 6 m (50 %, 3 points)'
+    """
+    high = at_least if math.isinf(iv.high) else f"{iv.high:.3g}"
+    return f"{iv.low:.3g} to {high}{unit} ({100 * iv.rate:.0f} %, {iv.points} points)"
+
+
+def over_points(fields: tuple, design, points: int) -> tuple[tuple, object]:
+    """A sequential design (:class:`studies.engine.sequential.SequentialDesign`) and its unit fields
+    for a run at ``points`` points of the unknowns besides the nominal one: each point is a unit of
+    its own (its limits are decided on its own frames) and the budget, which is the nominal grid's,
+    is repeated for each point. Unchanged when ``points`` is 0."""
+    if not points:
+        return fields, design
+    if design.budget_frames is not None:
+        design = design.with_overrides(budget_frames=design.budget_frames * (points + 1))
+    return (*fields, ("point", "point")), design
+
+
+def physics_note(summary: dict) -> list[str]:
+    """What a study's noise + physics intervals rest on, for its report's lead (none when the run
+    was not at points of the unknowns: its summary has no ``physics``)."""
+    physics = summary.get("physics")
+    if not physics:
+        return []
+    return [
+        f"Noise + physics: each condition also ran at {physics['source']}. A noise + physics interval lies "
+        "between the k-th smallest and k-th largest of the points' estimates, a predictive interval for hardware "
+        "drawn from the same set at the rate it states (studies/engine/uncertainty.py); every other number, and "
+        "the 95 % intervals beside them, is the nominal point's noise and pose alone."
+    ]

@@ -105,8 +105,9 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["study", "brightness-diffuser", "--uncertainty", "4"],
-         r"uncertainty: expected a study that states it \(range-limit\), got brightness-diffuser"),
+        (["study", "replication", "--uncertainty", "4"],
+         r"uncertainty: expected a study that states it \(range-limit, webcam-vs-dslr, brightness-diffuser; "
+         r"replication re-runs the source study's own configurations\), got replication"),
         (["study", "range-limit", "--uncertainty", "0"], r"uncertainty: expected an integer >= 1"),
         (["study", "range-limit", "--uncertainty", "4", "--physics-from", "none.csv"],
          r"physics-from: expected a calibration's nroy.csv or 'registry', none.csv is not a file"),
@@ -174,3 +175,80 @@ def test_the_main_jobs_design_budget_grows_with_the_points(monkeypatch, tmp_path
     design = range_limit.default_design(True).with_overrides(budget_frames=40)
     summary = range_limit.run(tmp_path, options, design=design)
     assert summary["design"]["budget_frames"] == 120 and summary["design"]["frames"] <= 120
+
+
+def _red_points(n: int, seed: int) -> tuple[dict, ...]:
+    from studies.engine.unknowns import load_unknowns, sample
+
+    space = {"led_intensity_red": load_unknowns()["led_intensity_red"]}
+    return tuple({"led_intensity_red": p["led_intensity_red"]} for p in sample(space, n, seed=seed))
+
+
+def _red_chroma(task: dict) -> tuple[float, float]:
+    """Planted colours: the red side's r chromaticity moves with the red LEDs' bin (0.4 at 3 cd, + 0.05
+    per cd), the green side sits at r = 0.3; both at g = 0.3, so the closest pair's Mahalanobis
+    distance is (r_red − 0.3) / CHROMA_SD."""
+    from tests.helpers.planted_frames import red_bin
+
+    return (0.4 + 0.05 * (red_bin(task) - 3.0), 0.3) if task["scenario"]["side"] == "red" else (0.3, 0.3)
+
+
+def test_webcam_vs_dslr_states_far_limit_and_colour_separability_with_the_physics(monkeypatch, tmp_path):
+    """webcam-vs-dslr at points of a planted unknown: the far limit's and the closest pair's noise + physics
+    intervals span the points' known truths, while every other number is the nominal point's."""
+    from studies.catalog import webcam_vs_dslr
+    from studies.engine import sequential
+    from studies.engine.max_range import LN19
+    from studies.engine.tasks import StudyOptions
+    from tests.helpers.planted_frames import CHROMA_SD, planted_rows, red_bin
+
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 8.0 + 1.5 * (red_bin(t) - 5.1), _red_chroma))
+    monkeypatch.setattr(webcam_vs_dslr, "mosaic_png", lambda options, out: None)
+    points = _red_points(16, seed=5)
+    base = StudyOptions(cameras=("canon-t6-18mm",), sides=("red", "green"), ranges_m=(2.0, 6.0, 10.0, 14.0), seeds=3)
+    design = sequential.SequentialDesign(target_relative=0.2, max_range_m=20.0)
+    nominal = webcam_vs_dslr.run(tmp_path / "nominal", base, design=design)
+    summary = webcam_vs_dslr.run(
+        tmp_path / "physics", base.with_overrides(physics=points, physics_source="16 planted points"), design=design
+    )
+    sep, sep0 = summary["colour_separability"][0], nominal["colour_separability"][0]
+    assert sep["min_mahalanobis"] == sep0["min_mahalanobis"] and sep["frames"] == sep0["frames"]  # nominal alone
+    assert sep0["min_mahalanobis"] == pytest.approx((0.4 + 0.05 * 2.1 - 0.3) / CHROMA_SD, rel=0.1)  # 5.1 cd
+    d = sorted((0.1 + 0.05 * (p["led_intensity_red"] - 3.0)) / CHROMA_SD for p in points)
+    iv = sep["separability_physics"]
+    assert iv["low"] == pytest.approx(d[0], rel=0.1) and iv["high"] == pytest.approx(d[-1], rel=0.1)
+    assert sep["separability_interval_physics"].endswith("(88 %, 16 points)")
+    # the far limit: a planted fall-off like range-limit's test (half as steep: every point's limit lies
+    # beyond the first range), pooled over the two sides
+    far = sorted(8.0 + 1.5 * (p["led_intensity_red"] - 5.1) - 0.4 * LN19 for p in points)
+    best = next(r for r in summary["max_range"] if r["tracker"] == "best")
+    assert best["far_physics"]["low"] == pytest.approx(far[0], abs=1.0)
+    assert best["far_physics"]["high"] == pytest.approx(far[-1], abs=1.0)
+    top = summary["ranking"][0]
+    assert top["far_interval_physics"] == best["far_interval_physics"]
+    assert top["separability_interval_physics"] == sep["separability_interval_physics"]
+    page = (tmp_path / "physics" / "report.html").read_text()
+    assert "closest pair, noise + physics" in page and "each condition also ran at 16 planted points" in page
+
+
+def test_brightness_diffuser_states_how_often_its_setting_stays_in_the_window(monkeypatch, tmp_path):
+    """brightness-diffuser at points of a planted unknown whose fall-off crosses its one range: the
+    recommended setting's lowest P(correct) over the points, and at how many points it stays in the
+    window, follow the planted truth (at 5 m the frames all succeed where r50 ≥ 7 m and all fail where
+    r50 ≤ 3 m)."""
+    from studies.catalog import brightness_diffuser
+    from studies.engine import sweep
+    from studies.engine.tasks import StudyOptions
+    from tests.helpers.planted_frames import planted_rows, red_bin
+
+    monkeypatch.setattr(sweep, "run_frames", planted_rows(lambda t: 9.0 if red_bin(t) > 5.0 else 1.0, _red_chroma))
+    points = ({"led_intensity_red": 3.5}, {"led_intensity_red": 4.5}, {"led_intensity_red": 6.0})
+    options = StudyOptions(
+        cameras=("logitech-c270",), ranges_m=(5.0,), currents_mA=(2.0,), diffusers=((True, 1, "white"),), seeds=8,
+        physics=points, physics_source="3 planted points",
+    )  # fmt: skip
+    rec = brightness_diffuser.run(tmp_path, options)["recommended"][0]
+    assert rec["p_detect"] == 1.0  # the nominal point: 5.1 cd, r50 = 9 m
+    assert rec["window_points"] == "1 of 3"
+    assert (rec["p_physics"]["low"], rec["p_physics"]["high"]) == (0.0, 1.0)
+    assert "in the window at 1 of 3 points" in brightness_diffuser.recommendation_text(rec)
