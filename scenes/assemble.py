@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
-from scenes.led import led_for_side
 from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.scenario import Scenario, ScenarioError
 from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
@@ -49,7 +48,7 @@ class CropBox:
 
 def bare_face_emitter(design: BeaconDesign, side: str) -> dict:
     """The lit-face emitter of a bare LED: radiance (1/A)[(1 − s) cos^(m−1)θ + s] per W·sr⁻¹."""
-    led = led_for_side(side)
+    led = design.led(side)
     emitter = {
         "type": "marker_face",
         "group": f"led:{side}",

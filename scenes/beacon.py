@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from scenes.hardware import HardwareFile, hardware_names, hardware_source
-from scenes.led import SIDE_COLOURS
+from scenes.led import LED, SIDE_COLOURS, led_for_side, led_part
 from scenes.sourced import DataFileError, Fields, loads_sourced
 
 HOUSING_FINISHES = ("white", "black")
@@ -73,6 +73,9 @@ class BeaconDesign:
     lit_face_reflectance: float
     housing_reflectance: dict[str, float]
     housing_transmittance: dict[str, float]
+    led_parts: tuple[tuple[str, str], ...] = ()
+    """(side, part name) of the sides whose LEDs are not their colour's default part
+    (:func:`scenes.led.led_part`); the file's ``[leds]`` table."""
 
     def __post_init__(self) -> None:
         for finish, t in self.housing_transmittance.items():
@@ -88,6 +91,11 @@ class BeaconDesign:
     def lit_face_area_m2(self) -> float:
         """Area of one lit face, m²."""
         return math.pi * (0.5 * self.lit_face_diameter_m) ** 2
+
+    def led(self, side: str) -> LED:
+        """The LED part of a side: the one the file names (``[leds]``), else the colour's default."""
+        named = dict(self.led_parts).get(side)
+        return led_for_side(side) if named is None else led_part(named, side)
 
     def marker(self, marker_id: int) -> Marker:
         """The marker with the study's number ``marker_id`` (1-5)."""
@@ -199,9 +207,28 @@ def _design_from_source(source: HardwareFile) -> BeaconDesign:
         lit_face_reflectance=f.number("lit_face_reflectance", minimum=0.0, maximum=1.0),
         housing_reflectance=r,
         housing_transmittance=t,
+        led_parts=_led_parts(f),
     )
     f.check_known()
     return design
+
+
+def _led_parts(f: Fields) -> tuple[tuple[str, str], ...]:
+    """The ``[leds]`` table (side = part name), checked: a side colour, a known part of that colour."""
+    if not f.has("leds"):
+        return ()
+    table = f.table("leds")
+    out = []
+    for side in sorted(table.values):
+        if side not in SIDE_COLOURS:
+            raise DataFileError(f"{f.file}: leds.{side}: expected a side colour ({', '.join(SIDE_COLOURS)})")
+        name = table.text(side)
+        try:
+            led_part(name, side)
+        except ValueError as exc:
+            raise DataFileError(f"{f.file}: leds.{side}: {str(exc).removeprefix('led: ')}") from None
+        out.append((side, name))
+    return tuple(out)
 
 
 def beacon_template(like: str = "v2") -> str:
@@ -210,8 +237,10 @@ def beacon_template(like: str = "v2") -> str:
     out = [
         f"# A beacon file for beacon-sim, made from '{like}' (beacon-sim beacons --template --like {like}).",
         "# Edit every value for your beacon; give each number a `source` or an `assumed` note.",
-        "# Use it with --beacon-file FILE. The LEDs, diffusers and colours of the four sides are",
-        "# set per run (--led-current-ma, --foam, --paper-sheets, --paper-colour).",
+        "# Use it with --beacon-file FILE. Each side's LED is its colour's default part unless a",
+        '# [leds] table names another of that colour (e.g. green = "cree-c503t-gan"; the parts are in',
+        "# scenes/data/leds.toml and led_parts.toml); drive and diffusers are set per run",
+        "# (--led-current-ma, --foam, --paper-sheets, --paper-colour).",
     ]
     for line in lines:
         if line.startswith("name ="):

@@ -1,6 +1,7 @@
 """LED emitters: spectrum, absolute radiant intensity and angular pattern.
 
-An LED is described by its datasheet figures (``scenes/data/leds.toml``):
+An LED is described by its datasheet figures (``scenes/data/leds.toml``, the default part of each
+side colour; ``scenes/data/led_parts.toml``, other parts a beacon file may name):
 
 * spectrum: colour-science's single-LED model (Ohno 2005) with the peak wavelength that
   reproduces the datasheet's dominant wavelength, and an assumed FWHM;
@@ -28,6 +29,17 @@ from numpy.typing import NDArray
 
 from scenes import spectra
 from scenes.sourced import DATA_DIR, load_sourced
+
+__all__ = [
+    "LED",
+    "SIDE_COLOURS",
+    "led_for_side",
+    "led_part",
+    "led_part_names",
+    "led_parts",
+    "load_leds",
+    "wide_fraction_for_flux",
+]
 
 SIDE_COLOURS = ("red", "green", "blue", "yellow")
 """Beacon side colours, in the order the study's detector tries them."""
@@ -161,8 +173,50 @@ def load_leds() -> dict[str, LED]:
     return leds
 
 
+@lru_cache(maxsize=1)
+def led_parts() -> dict[str, LED]:
+    """Every LED part a beacon may use, by name: the four default parts of ``scenes/data/leds.toml``
+    under their colour (``red``, ``green``, ``blue``, ``yellow``), then the alternatives of
+    ``scenes/data/led_parts.toml`` under their ids (e.g. ``cree-c503t-gan``, a 15° green lamp)."""
+    parts = dict(load_leds())
+    values, _ = load_sourced(DATA_DIR / "led_parts.toml")
+    for name, fields in values.items():
+        fields = dict(fields)
+        colour = fields.pop("colour", None)
+        if colour not in SIDE_COLOURS:
+            raise ValueError(
+                f"led_parts.toml: {name}.colour: expected one of {', '.join(SIDE_COLOURS)}, got {colour!r}"
+            )
+        parts[name] = LED(colour=colour, **fields)
+    return parts
+
+
+def led_part_names(colour: str) -> list[str]:
+    """The parts of one colour, its default (named by the colour) first."""
+    return [n for n, p in led_parts().items() if p.colour == colour]
+
+
+def led_part(name: str, side: str | None = None) -> LED:
+    """The LED part ``name`` (:func:`led_parts`); with ``side``, refused unless it is of that side's colour.
+
+    Examples
+    --------
+    >>> led_part("cree-c503t-gan", "green").half_angle_deg
+    7.5
+    """
+    parts = led_parts()
+    if name not in parts:
+        raise ValueError(f"led: expected one of {', '.join(parts)}, got {name!r}")
+    if side is not None and parts[name].colour != side:
+        fits = ", ".join(led_part_names(side))
+        got = f"{name!r} ({parts[name].colour})"
+        raise ValueError(f"led: expected a {side} part for the {side} side ({fits}), got {got}")
+    return parts[name]
+
+
 def led_for_side(side: str) -> LED:
-    """The LED used on a beacon side (``red``, ``green``, ``blue`` or ``yellow``)."""
+    """The default LED of a side's colour (``red``, ``green``, ``blue`` or ``yellow``); a beacon may
+    name another part of that colour (:meth:`scenes.beacon.BeaconDesign.led`)."""
     leds = load_leds()
     if side not in leds:
         raise ValueError(f"side: expected one of {', '.join(SIDE_COLOURS)}, got {side!r}")

@@ -5,8 +5,9 @@ the in-plane markers' offset from the centre (``arm_length_mm``: V1 45 mm, V2 70
 marker's offset out of the plane (``out_of_plane_mm``), which way the in-plane LEDs face, and the
 lit face each marker shows. :class:`BeaconParameters` holds those choices; everything else of a
 beacon (housing walls and finishes, the node, d_t) comes from a ``base`` beacon's file, with its
-sources. :meth:`BeaconParameters.text` writes the beacon file of an instance (the base's file with
-the chosen values, each marked ``assumed`` as a design candidate), which
+sources. The LED part of each side is its colour's default unless ``leds`` names another of that
+colour (``scenes/data/led_parts.toml``). :meth:`BeaconParameters.text` writes the beacon file of an
+instance (the base's file with the chosen values, each marked ``assumed`` as a design candidate), which
 :func:`scenes.hardware.add_hardware_file` registers like any user's beacon (``register``), so the
 renderer, the detectors and the pose solvers all see the same geometry.
 
@@ -29,6 +30,7 @@ from pathlib import Path
 
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.hardware import add_hardware_file, hardware_source
+from scenes.led import led_part
 
 __all__ = ["FACES", "BeaconParameters"]
 
@@ -54,6 +56,9 @@ class BeaconParameters:
         ``viewer`` (the LEDs' axes toward the viewer) or ``outward`` (along their arms).
     base
         The beacon whose file gives everything else (housing, node, d_t), with its sources.
+    leds
+        (side, LED part) of the sides that do not use their colour's default part
+        (:func:`scenes.led.led_parts`; the file's ``[leds]`` table), sorted by side.
     """
 
     arm_length_mm: float
@@ -61,6 +66,7 @@ class BeaconParameters:
     lit_face_diameter_mm: float
     in_plane_leds_face: str = "viewer"
     base: str = "v2"
+    leds: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         for name in _NUMBERS:
@@ -72,6 +78,13 @@ class BeaconParameters:
                 raise ValueError(f"{name}: expected a size > 0 mm, got {getattr(self, name)!r}")
         if self.out_of_plane_mm < 0:
             raise ValueError(f"out_of_plane_mm: expected an offset >= 0 mm, got {self.out_of_plane_mm!r}")
+        for side, part in self.leds:
+            try:
+                led_part(part, side)
+            except ValueError as exc:
+                raise ValueError(f"leds.{side}: {str(exc).removeprefix('led: ')}") from None
+        if list(self.leds) != sorted(dict(self.leds).items()):
+            raise ValueError(f"leds: expected (side, part) pairs sorted by side, one per side, got {self.leds!r}")
         if self.in_plane_leds_face not in FACES:
             raise ValueError(f"in_plane_leds_face: expected one of {', '.join(FACES)}, got {self.in_plane_leds_face!r}")
 
@@ -86,6 +99,7 @@ class BeaconParameters:
             lit_face_diameter_mm=round(d.lit_face_diameter_m * 1e3, 9),
             in_plane_leds_face=face.group(1) if face else "viewer",
             base=name,
+            leds=d.led_parts,
         )
 
     @property
@@ -96,7 +110,8 @@ class BeaconParameters:
     @property
     def name(self) -> str:
         """A name that says what the instance is and cannot clash between different ones."""
-        digest = hashlib.sha256(repr(tuple(getattr(self, f.name) for f in fields(self))).encode()).hexdigest()[:8]
+        values = tuple(getattr(self, f.name) for f in fields(self) if f.name != "leds" or self.leds)  # () as before
+        digest = hashlib.sha256(repr(values).encode()).hexdigest()[:8]
         sizes = f"arm{self.arm_length_mm:.4g}-out{self.out_of_plane_mm:.4g}-face{self.lit_face_diameter_mm:.4g}"
         return f"{self.base}-{sizes}-{digest}"
 
@@ -104,7 +119,12 @@ class BeaconParameters:
         """The instance's beacon file: the base's file with these values, each ``assumed`` as a candidate."""
         why = "a design candidate (scenes.parametric_beacon), not a built beacon"
         out = []
+        in_leds = False
         for line in hardware_source("beacon", self.base).text.splitlines():
+            if line.strip().startswith("["):
+                in_leds = line.strip() == "[leds]"
+            if in_leds:  # the base's own parts: replaced by this instance's table below
+                continue
             key = line.split("=", 1)[0].strip()
             if key == "name":
                 line = f'name = "{self.name}"'
@@ -118,6 +138,8 @@ class BeaconParameters:
             elif key == "in_plane_leds_face":
                 line = f'in_plane_leds_face = "{self.in_plane_leds_face}"'
             out.append(line)
+        if self.leds:
+            out += ["", "[leds]", *(f'{side} = "{part}"' for side, part in self.leds)]
         return "\n".join(out) + "\n"
 
     def register(self, folder: Path) -> str:

@@ -203,7 +203,7 @@ class Scenario:
         """Raise :class:`ScenarioError` naming the first bad field."""
         try:
             beacon_design(self.beacon)
-            led = led_for_side(self.side)
+            led = beacon_design(self.beacon).led(self.side)
             camera_geometry(self.camera)
             environment(self.environment)
         except ScenarioError:
@@ -270,10 +270,20 @@ class Scenario:
         return self.led_for(self.side)
 
     def led_for(self, side: str) -> LED:
-        """The LED of a side (with the intensity bin of :attr:`data`)."""
-        led = led_for_side(side)
+        """The LED of a side: the beacon's part (:meth:`scenes.beacon.BeaconDesign.led`) with the
+        intensity bin of :attr:`data`. The bin (``leds.<side>.luminous_intensity_cd``) is the default
+        part's; another part takes it as the same ratio to its own typical intensity (assumed: the
+        delivered rank relative to the typical is what varies, and 5 mm lamps' ranks span similar
+        ratios, scenes/data/leds.toml and led_parts.toml)."""
+        led = beacon_design(self.beacon).led(side)
         cd = self._data(f"leds.{side}.luminous_intensity_cd")
-        return led if cd is None else dataclasses.replace(led, luminous_intensity_cd=cd)
+        if cd is None:
+            return led
+        default = led_for_side(side)
+        if led == default:
+            return dataclasses.replace(led, luminous_intensity_cd=cd)
+        ratio = cd / default.luminous_intensity_cd
+        return dataclasses.replace(led, luminous_intensity_cd=led.luminous_intensity_cd * ratio)
 
     def _data(self, path: str) -> float | None:
         return dict(self.data).get(path)

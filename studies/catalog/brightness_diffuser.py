@@ -21,7 +21,6 @@ import numpy as np
 import pandas as pd
 
 from scenes.beacon import beacon_design
-from scenes.led import led_for_side
 from scenes.render_cache import atomic_write_bytes
 from studies.engine import strict_json
 from studies.engine.metrics import wilson_interval
@@ -112,9 +111,10 @@ def configuration_table(frame):
             core_saturation=float(np.nanmean(g.core_saturated_fraction_mean)),
             r_chroma=float(np.nanmean(chroma[:, 0])),
             g_chroma=float(np.nanmean(chroma[:, 1])),
-            led_power_mW=1e3 * led_for_side(rec["side"]).radiant_flux_W(rec["led_current_mA"]),
         )
-        markers = len(beacon_design(str(g.beacon.iloc[0])).marker_positions_m())
+        design = beacon_design(str(g.beacon.iloc[0]))
+        rec["led_power_mW"] = 1e3 * design.led(rec["side"]).radiant_flux_W(rec["led_current_mA"])
+        markers = len(design.marker_positions_m())
         rec["side_power_mW"] = markers * rec["led_power_mW"]  # every LED of the side at this drive
         rec["in_window"] = bool(p >= 0.95 and rec["core_saturation"] < 0.5)
         out.append(rec)

@@ -1,8 +1,9 @@
 """``beacon-sim design``: search the beacon's design for the one that reaches farthest with a camera.
 
 A design (:data:`SPACE`) is a parametric beacon (:class:`scenes.parametric_beacon.BeaconParameters`:
-in-plane and out-of-plane marker offsets, lit face) with what a run sets per side (LED drive, foam,
-paper sheets), and, for an interchangeable-lens body, the lens's focal length (:func:`space_for`).
+in-plane and out-of-plane marker offsets, lit face, the side's LED part where its colour has more
+than one) with what a run sets per side (LED drive, foam, paper sheets), and, for an
+interchangeable-lens body, the lens's focal length (:func:`space_for`).
 Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`) of
 one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, best tracker; "≥ the farthest
 range tried" counts as that range), the optical power of one side (five LEDs' radiant flux at the
@@ -12,8 +13,11 @@ The search (:func:`studies.engine.design_search.search`: optuna's multivariate T
 budget (power per side, span), and the report puts the front beside V2 as built (foam + one matched
 sheet) at the drive that spends the same power per side.
 
-The far limit is the nominal point's (noise and pose only); the physics interval of a design
-(``--uncertainty``) is not searched over: each would cost N range-limit runs.
+A design must work over the target's yaws: its far limit is the smallest over them. It is the
+nominal point's (noise and pose only) unless the target runs each design at N points of the
+unknowns too (``--uncertainty N``, N + 1 times the frames) and scores it by the noise + physics
+interval's lower end (``--at low``: the design that reaches farthest even for unlucky hardware)
+or the points' median (``--at median``).
 
 Outputs in ``out``: ``search.journal``, ``front.csv``, ``trials.csv``, ``summary.json`` (the
 search's), ``design.json`` (the front beside V2, the budget, counts and wall time), ``report.html``,
@@ -30,7 +34,7 @@ from pathlib import Path
 import pandas as pd
 
 from camera_models.lens_variant import register_lens_variant
-from scenes.led import led_for_side
+from scenes.led import led_for_side, led_part, led_part_names
 from scenes.parametric_beacon import BeaconParameters
 from scenes.render_cache import atomic_write_bytes
 from studies.catalog import range_limit
@@ -51,7 +55,19 @@ from studies.engine.sequential import SequentialDesign
 from studies.engine.sweep import Execution
 from studies.engine.tasks import StudyOptions
 
-__all__ = ["MARKERS", "NAME", "SPACE", "Budget", "Target", "evaluate_design", "run", "space_for", "v2_at"]
+__all__ = [
+    "AT",
+    "MARKERS",
+    "NAME",
+    "SPACE",
+    "Budget",
+    "Target",
+    "evaluate_design",
+    "run",
+    "scored_far_limit",
+    "space_for",
+    "v2_at",
+]
 
 NAME = "design"
 MARKERS = 5
@@ -86,27 +102,64 @@ OBJECTIVES = (
 )
 
 
+AT = ("nominal", "low", "median")
+"""Which far limit a design is scored by: the nominal point's, or over the points of the unknowns
+(:attr:`Target.physics`) the noise + physics interval's lower end or the points' median."""
+
+
 @dataclass(frozen=True)
 class Target:
-    """What a design is evaluated on: one camera, side and yaw; ``focal_lengths_mm`` (low, high) also
-    searches the lens of an interchangeable-lens body (:mod:`camera_models.lens_variant`)."""
+    """What a design is evaluated on.
+
+    Attributes
+    ----------
+    camera, side
+        The camera and the beacon side it sees.
+    yaws_deg
+        The yaws the design must work at, degrees: its far limit is the smallest over them.
+    quick
+        A coarser range grid per design.
+    focal_lengths_mm
+        (low, high): also search the lens of an interchangeable-lens body
+        (:mod:`camera_models.lens_variant`).
+    physics, physics_source
+        Points of the unknowns each design also runs at (``--uncertainty``), and what they are.
+    at
+        One of :data:`AT`: the far limit scored (``low`` and ``median`` need ``physics``).
+    """
 
     camera: str
     side: str = "red"
-    yaw_deg: float = 30.0
+    yaws_deg: tuple[float, ...] = (30.0,)
     quick: bool = False
     focal_lengths_mm: tuple[float, float] | None = None
+    physics: tuple[dict, ...] = ()
+    physics_source: str = ""
+    at: str = "nominal"
+
+    def __post_init__(self) -> None:
+        if not self.yaws_deg or not all(0 <= y <= 90 for y in self.yaws_deg):
+            raise ValueError(f"yaws_deg: expected angles in [0, 90], got {list(self.yaws_deg)}")
+        if self.at not in AT:
+            raise ValueError(f"at: expected one of {', '.join(AT)}, got {self.at!r}")
+        if self.at != "nominal" and not self.physics:
+            raise ValueError(f"at: {self.at!r} needs points of the unknowns (--uncertainty N), got none")
 
 
 def space_for(target: Target) -> DesignSpace:
-    """:data:`SPACE`, with the lens's focal length when the target searches it."""
-    if target.focal_lengths_mm is None:
-        return SPACE
-    low, high = target.focal_lengths_mm
-    lens = float_param("focal_length_mm", float(low), float(high), log=True, unit="mm",
-                       assumed="the user's range of lenses for the body (--focal-length-mm), each at the base "
-                       "lens's f-number, blur and distortion")  # fmt: skip
-    return DesignSpace((*SPACE.params, lens))
+    """:data:`SPACE`, with the LED part when the side's colour has more than one
+    (:func:`scenes.led.led_part_names`) and the lens's focal length when the target searches it."""
+    params = list(SPACE.params)
+    parts = led_part_names(target.side)
+    if len(parts) > 1:
+        params.append(choice_param("led", parts, assumed=f"the {target.side} parts of scenes/data/leds.toml "
+                                   "and led_parts.toml, each with its datasheet figures"))  # fmt: skip
+    if target.focal_lengths_mm is not None:
+        low, high = target.focal_lengths_mm
+        params.append(float_param("focal_length_mm", float(low), float(high), log=True, unit="mm",
+                                  assumed="the user's range of lenses for the body (--focal-length-mm), each at the "
+                                  "base lens's f-number, blur and distortion"))  # fmt: skip
+    return SPACE if len(params) == len(SPACE.params) else DesignSpace(tuple(params))
 
 
 @dataclass(frozen=True)
@@ -123,9 +176,10 @@ class Budget:
         return tuple(out)
 
 
-def side_power_mW(side: str, current_mA: float) -> float:
-    """Optical power of one side's five LEDs at ``current_mA``, mW."""
-    return MARKERS * 1e3 * led_for_side(side).radiant_flux_W(current_mA)
+def side_power_mW(side: str, current_mA: float, part: str | None = None) -> float:
+    """Optical power of one side's five LEDs at ``current_mA``, mW: the ``part`` named (default: the
+    side colour's default part, :func:`scenes.led.led_parts`)."""
+    return MARKERS * 1e3 * led_part(part or side, side).radiant_flux_W(current_mA)
 
 
 def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
@@ -133,22 +187,26 @@ def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
         cameras=(target.camera,),
         beacons=(beacon,),
         sides=(target.side,),
-        yaws_deg=(float(target.yaw_deg),),
+        yaws_deg=tuple(float(y) for y in target.yaws_deg),
         currents_mA=(round(float(design["led_current_mA"]), 6),),
         diffusers=((bool(design["foam"]), int(design["paper_sheets"]), "matched"),),
         ranges_m=(2.0, 5.0, 8.0, 12.0) if target.quick else (2.0, 4.0, 6.0, 8.0, 10.0, 12.0),
         seeds=2 if target.quick else 3,
         jitter_poses=1 if target.quick else 2,
+        physics=target.physics,
+        physics_source=target.physics_source,
     )
 
 
 def evaluate_design(design: dict, target: Target, out: Path, execution: Execution = Execution()) -> dict[str, float]:
     """A design's metrics: its beacon registered, a sequential range-limit run of ``target`` in
     ``out/evaluations/<beacon>``, the far limit of its best-tracker record."""
+    part = design.get("led", target.side)
     params = BeaconParameters(
         arm_length_mm=round(float(design["arm_length_mm"]), 3),
         out_of_plane_mm=round(float(design["out_of_plane_mm"]), 3),
         lit_face_diameter_mm=round(float(design["lit_face_diameter_mm"]), 3),
+        leds=((target.side, part),) if part != target.side else (),
     )
     beacon = params.register(out / "beacons")
     if "focal_length_mm" in design:
@@ -162,13 +220,21 @@ def evaluate_design(design: dict, target: Target, out: Path, execution: Executio
     summary = range_limit.run(
         run_out, options, execution, design=SequentialDesign(target_relative=0.2, max_range_m=20.0)
     )
-    rec = summary["max_range"][0]
-    far = float(rec["farthest_tested_m"]) if rec.get("at_least") else max(float(rec["max_range_m"]), 0.0)
     return {
-        "far_limit_m": far,
-        "side_power_mW": side_power_mW(target.side, float(design["led_current_mA"])),
+        "far_limit_m": min(scored_far_limit(rec, target.at) for rec in summary["max_range"]),
+        "side_power_mW": side_power_mW(target.side, float(design["led_current_mA"]), part),
         "span_mm": params.span_mm,
     }
+
+
+def scored_far_limit(rec: dict, at: str) -> float:
+    """A range-limit record's far limit as a design is scored (:data:`AT`), m; one that reaches the
+    farthest range tried counts as that range (its limit is at least that)."""
+    farthest = float(rec["farthest_tested_m"])
+    if at == "nominal":
+        return farthest if rec.get("at_least") else max(float(rec["max_range_m"]), 0.0)
+    value = rec["far_physics"]["low" if at == "low" else "median"]
+    return farthest if value is None else min(float(value), farthest)
 
 
 def v2_at(budget: Budget, target: Target) -> dict:
@@ -245,7 +311,7 @@ COLUMNS = {
     "foam": "foam",
     "paper_sheets": "sheets",
 }
-"""The report table's columns and their headers (``focal_length_mm`` added when the lens is searched)."""
+"""The report table's columns and their headers (``led`` and ``focal_length_mm`` added when searched)."""
 
 
 def _far(far_limit_m: float) -> str:
@@ -254,7 +320,8 @@ def _far(far_limit_m: float) -> str:
 
 def _report(out: Path, summary: dict) -> None:
     t, b, v2 = summary["target"], summary["budget"], summary["v2_at_budget"]
-    rep = Report(f"Design search: the beacon that reaches farthest with {t['camera']} at {t['yaw_deg']:g}°")
+    yaws = " to ".join(f"{y:g}" for y in sorted({min(t["yaws_deg"]), max(t["yaws_deg"])}))
+    rep = Report(f"Design search: the beacon that reaches farthest with {t['camera']} at {yaws}°")
     span = f" and a span under {b['span_mm']:g} mm" if b.get("span_mm") else ""
     lead = [
         f"{summary['evaluations']} designs evaluated ({summary['feasible']} within {b['side_power_mW']:g} mW per "
@@ -276,7 +343,9 @@ def _report(out: Path, summary: dict) -> None:
     rep.lead(lead)
     rows = [{**p["design"], **p["metrics"], "trial": p["trial"]} for p in summary["front"]]
     rows.append({**v2["design"], **v2["metrics"], "trial": "V2 as built"})
-    columns = {**COLUMNS, **({"focal_length_mm": "lens, mm"} if any("focal_length_mm" in r for r in rows) else {})}
+    searched = {key for p in summary["front"] for key in p["design"]}
+    columns = {**COLUMNS, **{k: v for k, v in (("led", "LED part"), ("focal_length_mm", "lens, mm")) if k in searched}}
+    rows = [{**r, "led": r.get("led", t["side"])} for r in rows]  # V2 as built: the colour's default part
     rep.table(
         pd.DataFrame(rows).reindex(columns=list(columns)),
         "The Pareto front (far limit, power per side, span) and V2 at the same budget",

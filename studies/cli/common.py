@@ -211,3 +211,19 @@ def physics_source(physics_from: str) -> Path | None:
     if source is not None and not source.is_file():
         raise UsageError(f"physics-from: expected a calibration's nroy.csv or 'registry', {source} is not a file")
     return source
+
+
+def physics_points(uncertainty: int | None, physics_from: str) -> tuple[tuple[dict, ...], str]:
+    """The points of ``--uncertainty N`` from ``--physics-from`` and their description; empty without
+    it. A UsageError naming the option, before any work, for a bad N or source."""
+    from studies.catalog import prediction_set
+
+    if uncertainty is None:
+        return (), ""
+    if uncertainty < 1:
+        raise UsageError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {uncertainty}")
+    source = physics_source(physics_from)
+    try:
+        return prediction_set.physics_points(uncertainty, calibration=source)
+    except ValueError as e:
+        raise UsageError(f"physics-from: {e}") from None

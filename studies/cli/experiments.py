@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.table import Table
 
 from camera_models.camera import load_camera
+from scenes.led import led_part_names
 from scenes.mitsuba_variant import active_variant
 from scenes.render_cache import atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
@@ -32,6 +33,7 @@ from studies.cli.common import (
     execution,
     out_path,
     parse_list,
+    physics_points,
     physics_source,
     print_table,
     rich_progress,
@@ -562,7 +564,12 @@ def design(
     ],
     camera: opt.Camera = "logitech-c270",
     side: opt.Side = "red",
-    yaw_deg: Annotated[float, typer.Option("--yaw-deg", help="Beacon yaw the far limit is wanted at, degrees.")] = 30.0,
+    yaw_deg: Annotated[
+        str,
+        typer.Option(
+            "--yaw-deg", help="Beacon yaws the design must work at, degrees, comma-separated (0,30: the whole range)."
+        ),
+    ] = "30",
     max_side_power_mw: Annotated[
         float, typer.Option("--max-side-power-mw", help="Optical power budget of one side (five LEDs), mW.")
     ] = 10.0,
@@ -581,22 +588,40 @@ def design(
         ),
     ] = None,
     trials: Annotated[int, typer.Option("--trials", help="Designs to evaluate (each a range-limit run).")] = 40,
+    uncertainty: opt.Uncertainty = None,
+    physics_from: opt.PhysicsFrom = "calibration",
+    at: Annotated[
+        str,
+        typer.Option(
+            "--at",
+            help="Score designs by the nominal far limit, or (with --uncertainty) the noise + physics interval's "
+            "lower end ('low') or the points' median ('median').",
+        ),
+    ] = "nominal",
     resume: Annotated[bool, typer.Option("--resume", help="Continue the search in --out (to --trials).")] = False,
     quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid per design.")] = False,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
 ) -> None:
-    """Search the beacon's design (marker offsets, lit face, drive, diffusers) for the far limit at a yaw
-    under a power budget: the Pareto front of far limit, power and span, beside V2 at the same budget."""
+    """Search the beacon's design (marker offsets, lit face, LED part, drive, diffusers; a lens) for the far
+    limit over the yaws under a power budget: the Pareto front of far limit, power and span, beside V2 at
+    the same budget. With --uncertainty N every design also runs at N points of the unknowns and --at says
+    which far limit scores it."""
     from studies.catalog import design as search_design
     from studies.cli.common import rich_progress
 
     if camera not in camera_names():
         raise UsageError(f"camera: expected one of {', '.join(camera_names())}, got {camera!r}")
-    if not 0 <= yaw_deg <= 90:
-        raise UsageError(f"yaw-deg: expected an angle in [0, 90], got {yaw_deg:g}")
+    yaws = tuple(parse_list("yaw-deg", yaw_deg, float))
+    if not all(0 <= y <= 90 for y in yaws):
+        raise UsageError(f"yaw-deg: expected angles in [0, 90], got {yaw_deg}")
+    if at not in search_design.AT:
+        raise UsageError(f"at: expected one of {', '.join(search_design.AT)}, got {at!r}")
+    if at != "nominal" and uncertainty is None:
+        raise UsageError(f"at: {at!r} needs points of the unknowns (--uncertainty N), got none")
+    physics, source = physics_points(uncertainty, physics_from)
     ranges = {p.name: p for p in search_design.SPACE.params}
-    least = search_design.side_power_mW(side, ranges["led_current_mA"].low)
+    least = min(search_design.side_power_mW(side, ranges["led_current_mA"].low, p) for p in led_part_names(side))
     if not max_side_power_mw >= least:
         raise UsageError(
             f"max-side-power-mw: expected at least {least:.3g} mW (five LEDs at the search's lowest drive, "
@@ -622,7 +647,10 @@ def design(
             lens_variant_text(camera, lenses[0])
         except ValueError as exc:
             raise UsageError(f"focal-length-mm: {exc}") from None
-    target = search_design.Target(camera=camera, side=side, yaw_deg=yaw_deg, quick=quick, focal_lengths_mm=lenses)
+    target = search_design.Target(
+        camera=camera, side=side, yaws_deg=yaws, quick=quick, focal_lengths_mm=lenses, physics=physics,
+        physics_source=source, at=at,
+    )  # fmt: skip
     budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
     run_on = execution(workers)
     check_render_cache()

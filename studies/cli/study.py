@@ -13,7 +13,7 @@ from studies.catalog import MAIN_JOB, MAIN_JOB_DESIGNS, PHYSICS, SEQUENTIAL, STU
 from studies.catalog import validate as validation
 from studies.catalog.index import write_index
 from studies.cli import options as opt
-from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, physics_source
+from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, physics_points
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine.report import page_context
 from studies.engine.run_log import timed_part
@@ -72,24 +72,15 @@ def _checked(design: SequentialDesign, options) -> SequentialDesign:
 
 
 def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...]) -> tuple[tuple[dict, ...], str]:
-    """The points of ``--uncertainty`` from ``--physics-from`` (a calibration's nroy.csv or ``registry``) and
-    their description; empty without it. A UsageError, before any work, when a study of ``names`` cannot
-    state it or the source is not a calibration's NROY set."""
-    if uncertainty is None:
-        return (), ""
-    if uncertainty < 1:
-        raise UsageError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {uncertainty}")
+    """The points of ``--uncertainty`` (:func:`studies.cli.common.physics_points`); a UsageError, before
+    any work, when a study of ``names`` cannot state them."""
     refused = [n for n in names if n not in PHYSICS]
-    if refused:
+    if uncertainty is not None and refused:
         raise UsageError(
             f"uncertainty: expected a study that states it ({', '.join(PHYSICS)}; replication re-runs the source "
             f"study's own configurations), got {refused[0]}"
         )
-    source = physics_source(physics_from)
-    try:
-        return prediction_set.physics_points(uncertainty, calibration=source)
-    except ValueError as e:
-        raise UsageError(f"physics-from: {e}") from None
+    return physics_points(uncertainty, physics_from)
 
 
 def study(

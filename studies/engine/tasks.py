@@ -31,10 +31,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from scenes.beacon import beacon_names
+from scenes.beacon import beacon_design, beacon_names
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import ENVIRONMENT_NAMES
-from scenes.led import SIDE_COLOURS, led_for_side
+from scenes.led import SIDE_COLOURS
 from scenes.scenario import MAX_RANGE_M
 from scenes.view import camera_names
 from studies.engine.unknowns import apply, load_unknowns
@@ -105,7 +105,8 @@ class StudyOptions:
             if current <= 0:
                 raise ValueError(f"currents_mA: expected currents > 0 mA, got {current!r}")
             for side in self.sides:
-                led_for_side(side).check_current(current)
+                for beacon in self.beacons:
+                    beacon_design(beacon).led(side).check_current(current)
         if not isinstance(self.seeds, int) or self.seeds < 1:
             raise ValueError(f"seeds: expected an integer >= 1, got {self.seeds!r}")
         for foam, sheets, colour in self.diffusers:

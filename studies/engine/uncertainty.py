@@ -61,7 +61,9 @@ class PhysicsInterval:
     points
         N, the points it is made from.
     order
-            k, the rank of its ends among the points' estimates.
+        k, the rank of its ends among the points' estimates.
+    median
+        The points' median estimate, a central prediction (∞ when a middle estimate is censored).
     """
 
     low: float
@@ -69,6 +71,7 @@ class PhysicsInterval:
     rate: float
     points: int
     order: int
+    median: float = math.nan
 
     def to_dict(self) -> dict:
         """Plain form (``high`` None when censored, for strict JSON)."""
@@ -78,6 +81,7 @@ class PhysicsInterval:
             "rate": self.rate,
             "points": self.points,
             "order": self.order,
+            "median": None if math.isinf(self.median) else self.median,
         }
 
 
@@ -116,7 +120,7 @@ def physics_interval(limits: Sequence[float], *, rate: float = 0.95) -> PhysicsI
     k = order_for(n, rate)
     ranked = np.sort(x)
     return PhysicsInterval(low=float(ranked[k - 1]), high=float(ranked[n - k]), rate=1 - 2 * k / (n + 1),
-                           points=n, order=k)  # fmt: skip
+                           points=n, order=k, median=float(np.median(ranked)))  # fmt: skip
 
 
 def nominal_rows(frame: pd.DataFrame) -> pd.DataFrame:

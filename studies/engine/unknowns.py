@@ -294,9 +294,21 @@ def _scene_data(file: str) -> dict:
 
 def load_unknowns(path: str | Path = UNKNOWNS_FILE) -> dict[str, Unknown]:
     """The registry: name → :class:`Unknown`, in file order, validated (:class:`DataFileError`, one line
-    naming the file and the field)."""
+    naming the file and the field). Read once per file version (a study at points of the unknowns
+    applies them to every frame task); each call returns a dict of its own."""
+    try:
+        stat = Path(path).stat()
+        version = (stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        version = None  # load_tables names the file that cannot be read
+    return dict(_registry(str(path), version))
+
+
+@lru_cache(maxsize=8)
+def _registry(path: str, version: tuple[int, int] | None) -> tuple[tuple[str, Unknown], ...]:
+    del version  # part of the cache key only
     raw = load_tables(path, "unknowns")
-    return {name: _parse(name, table, str(path)) for name, table in raw.items()}
+    return tuple((name, _parse(name, table, path)) for name, table in raw.items())
 
 
 def nominal(unknowns: dict[str, Unknown]) -> dict[str, Any]:

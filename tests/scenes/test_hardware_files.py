@@ -148,3 +148,27 @@ def test_a_file_is_read_once_and_a_new_command_reads_it_again(tmp_path):
     assert add_hardware_file("camera", path) == name
     assert user_hardware_digest() not in ("", before)
     assert camera_geometry(name).width_px == 4000
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ('green = "cree-c503t-gan"', None),
+        ('green = "nope"', r"leds\.green: expected one of red, green, blue, yellow, cree-c503t-gan"),
+        ('red = "cree-c503t-gan"', r"leds\.red: expected a red part for the red side \(red\), got 'cree-c503t-gan'"),
+        ('purple = "red"', r"leds\.purple: expected a side colour \(red, green, blue, yellow\)"),
+    ],
+)
+def test_a_beacon_file_names_its_led_parts(tmp_path, table, message):
+    """A beacon's [leds] table picks a part per side from the catalogue (scenes/data/led_parts.toml);
+    an unknown part, a part of another colour or a key that is no side is one line naming the field."""
+    path = tmp_path / "leds.toml"
+    path.write_text((EXAMPLES / "v2-arms-100mm.toml").read_text().replace('"v2-arms-100mm"', '"v2-leds"')
+                    + f"\n[leds]\n{table}\n")  # fmt: skip
+    if message is None:
+        d = beacon_design(add_hardware_file("beacon", path))
+        assert d.led("green").part.startswith("Cree C503T-GAN") and d.led("red") == beacon_design("v2").led("red")
+        return
+    with pytest.raises(ValueError, match=message) as info:
+        beacon_design(add_hardware_file("beacon", path))
+    assert "\n" not in str(info.value)

@@ -68,3 +68,26 @@ def test_band_average_conserves_the_integral_inside_the_grid():
     bands = spectra.band_average(shape)
     widths = np.diff(np.clip(spectra.BAND_EDGES_NM, 380, 720))
     assert np.sum(bands * widths) == pytest.approx(1.0, rel=2e-3)
+
+
+def test_the_alternative_parts_reproduce_their_sheet():
+    """Cree CLD-CT939.000: C503T-GAN (green) and -BAN (blue) are 15° lamps binned 12000-64600 and
+    3000-16800 mcd at 20 mA; the catalogue's intensity is each range's geometric mean, to the sheet's
+    three figures."""
+    from scenes.led import led_part, led_part_names
+
+    gan, ban = led_part("cree-c503t-gan", "green"), led_part("cree-c503t-ban", "blue")
+    assert gan.half_angle_deg == ban.half_angle_deg == 7.5
+    assert gan.luminous_intensity_cd == pytest.approx(math.sqrt(12.0 * 64.6), rel=1e-3)
+    assert ban.luminous_intensity_cd == pytest.approx(math.sqrt(3.0 * 16.8), rel=1e-3)
+    assert gan.relative_intensity(math.radians(7.5)) == pytest.approx(0.5, rel=1e-12)
+    assert led_part_names("green") == ["green", "cree-c503t-gan"] and led_part_names("red") == ["red"]
+    # same drive, 3.3x the on-axis intensity, but a beam a quarter the solid angle: less flux than the 30° part
+    ratio = gan.radiant_flux_W(2.0) / LEDS["green"].radiant_flux_W(2.0)
+    lobe = {n: 2 * math.pi / (led.cos_exponent + 1) for n, led in (("gan", gan), ("gcn", LEDS["green"]))}
+    assert ratio == pytest.approx(27.84 / 8.38 * lobe["gan"] / lobe["gcn"], rel=1e-3)
+    with pytest.raises(ValueError, match=r"led: expected a green part for the green side \(green, cree-c503t-gan\), "
+                       r"got 'cree-c503t-ban' \(blue\)"):  # fmt: skip
+        led_part("cree-c503t-ban", "green")
+    with pytest.raises(ValueError, match=r"led: expected one of red, green, .*, got 'nope'"):
+        led_part("nope")

@@ -31,7 +31,7 @@ def planted(monkeypatch):
 
 
 def test_the_search_finds_long_arms_at_the_budgets_drive_and_compares_v2(planted, tmp_path):
-    target = design.Target(camera="logitech-c270", side="red", yaw_deg=30.0, quick=True)
+    target = design.Target(camera="logitech-c270", side="red", yaws_deg=(30.0,), quick=True)
     budget = design.Budget(side_power_mW=10.0)
     summary = design.run(tmp_path, target, budget, trials=24, seed=0)
     assert summary["evaluations"] == 24 and summary["feasible"] > 0
@@ -83,6 +83,10 @@ def test_v2_and_v1_are_instances_of_the_parametric_beacon(tmp_path):
         (["--camera", "logitech-c270", "--trials", "0"], "trials"),
         (["--camera", "logitech-c270", "--focal-length-mm", "4,12"], "focal-length-mm"),
         (["--camera", "raspberry-pi-hq-6mm", "--focal-length-mm", "12,4"], "focal-length-mm"),
+        (["--camera", "logitech-c270", "--yaw-deg", "0,95"], "yaw-deg"),
+        (["--camera", "logitech-c270", "--at", "low"], "at"),
+        (["--camera", "logitech-c270", "--at", "best", "--uncertainty", "3"], "at"),
+        (["--camera", "logitech-c270", "--uncertainty", "0"], "uncertainty"),
     ],
 )
 def test_bad_budgets_are_refused_in_one_line_before_any_work(monkeypatch, tmp_path, args, field):
@@ -110,5 +114,77 @@ def test_a_lens_variant_keeps_the_body_and_changes_only_the_focal_length(tmp_pat
             lens_variant_text("raspberry-pi-hq-6mm", -3.0)
         space = design.space_for(design.Target(camera="raspberry-pi-hq-6mm", focal_lengths_mm=(4.0, 35.0)))
         assert space.names[-1] == "focal_length_mm" and design.space_for(design.Target(camera="x")) is design.SPACE
+    finally:
+        clear_user_hardware()
+
+
+def _r50_toward_camera(task) -> float:
+    """Far limit's midpoint, m, from the radiant intensity the side's LED part sends toward the camera
+    at the task's yaw (its beam pattern, :meth:`scenes.led.LED.relative_intensity`) and the arm."""
+    sc = task["scenario"]
+    d = beacon_design(sc["beacon"])
+    led = d.led(sc["side"])
+    toward = led.radiant_intensity_W_sr(sc["led_current_mA"]) * float(
+        led.relative_intensity(math.radians(sc["yaw_deg"]))
+    )
+    return 4.0 + 0.03 * d.arm_length_m * 1e3 + 1.5 * math.log(toward / 1e-3)
+
+
+@pytest.mark.parametrize(("yaw_deg", "part"), [(0.0, "cree-c503t-gan"), (20.0, "green")])
+def test_the_search_picks_the_led_part_whose_beam_reaches_the_camera(monkeypatch, tmp_path, yaw_deg, part):
+    """Green has two parts: at equal power the 15° lamp sends ~3.7x the 30° lamp's intensity on axis but
+    ~1/11 of it 20° off axis (cos^m lobes with m 81 and 20), so the planted optimum is the narrow
+    part facing the camera and the wide one at 20°; the front's designs name their part and the
+    beacon they rendered uses it."""
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(_r50_toward_camera))
+    try:
+        target = design.Target(camera="logitech-c270", side="green", yaws_deg=(yaw_deg,), quick=True)
+        summary = design.run(tmp_path, target, design.Budget(side_power_mW=10.0), trials=20, seed=1)
+        best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
+        assert best["design"]["led"] == part
+        power = design.side_power_mW("green", best["design"]["led_current_mA"], best["design"]["led"])
+        assert best["metrics"]["side_power_mW"] == pytest.approx(power)
+        assert "LED part" in (tmp_path / "report.html").read_text()
+    finally:
+        clear_user_hardware()
+
+
+def test_a_parametric_beacon_names_its_parts_in_its_file(tmp_path):
+    from scenes.parametric_beacon import BeaconParameters
+
+    try:
+        p = BeaconParameters(80, 40, 12, leds=(("blue", "cree-c503t-ban"), ("green", "cree-c503t-gan")))
+        d = beacon_design(p.register(tmp_path))
+        assert d.led_parts == p.leds and BeaconParameters.of(d.name).leds == p.leds
+        assert BeaconParameters(80, 40, 12).name != p.name
+        with pytest.raises(ValueError, match=r"leds\.red: expected a red part for the red side \(red\)"):
+            BeaconParameters(80, 40, 12, leds=(("red", "cree-c503t-gan"),))
+    finally:
+        clear_user_hardware()
+
+
+def test_a_design_scored_over_the_points_of_the_unknowns_and_a_yaw_range(monkeypatch, tmp_path):
+    """At points of a planted unknown (the red bin moves the fall-off) a design's far limit at
+    ``--at low`` is the noise + physics interval's lower end and at ``median`` the points' median, of
+    its worst yaw; planted: r50 falls 0.1 m per degree of yaw, so 30° decides."""
+    from tests.helpers.planted_frames import red_bin
+
+    def r50(task) -> float:
+        return 7.0 + 1.5 * (red_bin(task) - 5.1) - 0.1 * task["scenario"]["yaw_deg"]
+
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(r50))
+    points = tuple({"led_intensity_red": v} for v in (3.4, 4.6, 6.5, 7.8, 4.0))
+    d = {"arm_length_mm": 70.0, "out_of_plane_mm": 46.0, "lit_face_diameter_mm": 12.0, "led_current_mA": 2.0,
+         "foam": True, "paper_sheets": 1}  # fmt: skip
+    try:
+        far = {}
+        for at in ("nominal", "low", "median"):
+            target = design.Target(camera="logitech-c270", yaws_deg=(0.0, 30.0), quick=True, physics=points, at=at)
+            far[at] = design.evaluate_design(d, target, tmp_path)["far_limit_m"]  # median: low's frames, resumed
+        truth = sorted(7.0 + 1.5 * (p["led_intensity_red"] - 5.1) - 3.0 - FALL_OFF_M * math.log(19) for p in points)
+        assert far["nominal"] == pytest.approx(7.0 - 3.0 - FALL_OFF_M * math.log(19), abs=0.6)
+        assert far["low"] == pytest.approx(truth[0], abs=0.6) and far["median"] == pytest.approx(truth[2], abs=0.6)
+        with pytest.raises(ValueError, match=r"at: 'low' needs points of the unknowns"):
+            design.Target(camera="logitech-c270", at="low")
     finally:
         clear_user_hardware()
