@@ -530,6 +530,7 @@ def sensitivity(
     quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid, two seeds per range.")] = False,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
+    scheduler: opt.Scheduler = None,
 ) -> None:
     """Rank the unknowns by how much of a camera's far limit (and of P(correct) at 5 m) each explains:
     Morris screening, then Sobol' indices, on an emulator of range-limit runs at points of the unknowns."""
@@ -549,7 +550,7 @@ def sensitivity(
         prediction_set.physics_points(points, seed=seed, calibration=source)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    run_on = execution(workers)
+    run_on = execution(workers, scheduler)
     check_render_cache()
     prepare_out_dir(out)
     summary = analysis.run(out, setting, points=points, calibration=source, seed=seed, quick=quick, execution=run_on)
@@ -602,6 +603,7 @@ def design(
     quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid per design.")] = False,
     seed: opt.Seed = 0,
     workers: opt.Workers = None,
+    scheduler: opt.Scheduler = None,
 ) -> None:
     """Search the beacon's design (marker offsets, lit face, LED part, drive, diffusers; a lens) for the far
     limit over the yaws under a power budget: the Pareto front of far limit, power and span, beside V2 at
@@ -652,7 +654,7 @@ def design(
         physics_source=source, at=at,
     )  # fmt: skip
     budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
-    run_on = execution(workers)
+    run_on = execution(workers, scheduler)
     check_render_cache()
     prepare_out_dir(out)
     with rich_progress("design search", trials, 0) as advance:
