@@ -26,6 +26,17 @@ from pipeline.angles import Intrinsics
 from pipeline.frames import Pose, pose_from_scenario
 from scenes.view import camera_geometry
 
+__all__ = [
+    "PoseBound",
+    "bound_from_covariance",
+    "planar_covariance",
+    "pose_covariance",
+    "pose_crlb",
+    "project_points",
+    "projection_jacobian",
+    "scenario_crlb",
+]
+
 
 def _skew(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
@@ -107,6 +118,18 @@ def bound_from_covariance(cov: NDArray[np.float64], pose: Pose) -> PoseBound:
         attitude_axes_rad=np.sqrt(np.diag(att_t)),
         position_t_m=np.sqrt(np.diag(cov_c)),
     )
+
+
+def planar_covariance(cov: NDArray[np.float64], pose: Pose) -> NDArray[np.float64]:
+    """3×3 covariance of the camera's horizontal pose in the target frame from a 6×6 (ω, t) one:
+    its position (x along the normal, y lateral; m) and its rotation about the target's vertical z
+    (rad), in the target frame's own axes (z down: a positive angle turns x toward y)."""
+    t, rot = pose.t_cv_m, pose.cv_from_t
+    position = np.hstack([-rot.T @ _skew(t), -rot.T])[:2]  # ∂c/∂(ω, t), the x and y rows
+    about_z = np.hstack([rot.T[2], np.zeros(3)])  # the z component of the rotation Rᵀω, in T
+    j = np.vstack([position, about_z])
+    out = j @ cov @ j.T
+    return (out + out.T) / 2
 
 
 def pose_crlb(points_t_m, pose: Pose, intrinsics: Intrinsics, sigma_px: float) -> PoseBound:

@@ -1,7 +1,7 @@
 """The ``beacon-sim`` command line, assembled in one place.
 
 Each command module (:mod:`studies.cli.hardware`, ``scene``, ``camera``, ``pipeline``,
-``study``, ``experiments``, ``checks``) defines plain functions and a ``COMMANDS`` table; this
+``study``, ``experiments``, ``robot``, ``checks``) defines plain functions and a ``COMMANDS`` table; this
 module registers them on one typer app, in the order ``--help`` lists them. Every
 command that writes results writes JSON beside its pictures.
 
@@ -33,12 +33,12 @@ import typer
 from rich.logging import RichHandler
 from typer._click import exceptions as cli_errors  # typer's own (vendored) click
 
-from studies.cli import camera, checks, experiments, hardware, pipeline, scene, study, unknowns
+from studies.cli import camera, checks, experiments, hardware, pipeline, robot, scene, study, unknowns
 from studies.cli.common import console
 from studies.cli.out_folder import folder_command, release_out_dirs
 from studies.engine.runner import DISK_FULL, NoWorkersError, RunStopped
 
-COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, checks, unknowns)
+COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, robot, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
 
 PROG = "beacon-sim"

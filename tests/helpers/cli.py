@@ -46,6 +46,7 @@ WORK_FUNCTIONS = {
     "studies.catalog.calibration": ["run"],
     "studies.catalog.sensitivity": ["run"],
     "studies.catalog.design": ["run"],
+    "studies.catalog.traverse": ["run"],
     "studies.catalog.webcam_vs_dslr": ["run"],
     "studies.catalog.brightness_diffuser": ["run"],
     "studies.catalog.range_limit": ["run"],

@@ -1,0 +1,72 @@
+"""Commands of the robot's view: a traverse through a lava tube with a ring of cameras."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from studies.cli import options as opt
+from studies.cli.common import UsageError, console, out_path, parse_list, rich_progress
+from studies.cli.out_folder import prepare_out_dir
+
+__all__ = ["COMMANDS", "traverse"]
+
+
+def traverse(
+    out: Annotated[Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory.")],
+    camera: Annotated[str, typer.Option("--camera", help="Ring camera (see 'beacon-sim cameras').")] = "spedal-920",
+    cameras_n: Annotated[int, typer.Option("--cameras-n", help="Cameras on the ring (the study: 6).")] = 6,
+    radius_m: Annotated[float, typer.Option("--radius-m", help="Ring radius, m (the study: 0.2).")] = 0.2,
+    spacing_m: Annotated[str, typer.Option("--spacing-m", help="Beacon spacings to try, m, comma-separated.")] = (
+        "5,10,15,20"
+    ),
+    path_m: Annotated[float, typer.Option("--path-m", help="Length of the drive, m.")] = 50.0,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per spacing (slip, noise and detections).")] = 5,
+    threshold_m: Annotated[
+        float, typer.Option("--threshold-m", help="Position error the answer keeps under along the whole path, m.")
+    ] = 1.0,
+    detections: Annotated[
+        Path | None,
+        typer.Option(
+            "--detections",
+            help="A range-limit summary.json whose working ranges give the camera's detection probability.",
+            show_default="results/full/range-limit.summary.json",
+        ),
+    ] = None,
+    quick: Annotated[bool, typer.Option("--quick", help="20 m, spacings 5 and 10 m, two seeds.")] = False,
+    beacon: opt.Beacon = "v2",
+) -> None:
+    """Drive a ring of cameras through a lava tube with beacons every D m: per step the detections, their
+    fused pose and wheel odometry corrected by it (EKF); the largest spacing that keeps the error under
+    the threshold (report.html, summary.json, steps.parquet)."""
+    from studies.catalog import traverse as tr
+
+    spacings = parse_list("spacing-m", spacing_m, float)
+    if quick:
+        spacings, path_m, seeds = (5.0, 10.0), 20.0, 2
+    if not spacings or not all(s > 0 for s in spacings):
+        raise UsageError(f"spacing-m: expected spacings > 0 m, got {spacing_m}")
+    if seeds < 1:
+        raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
+    if not threshold_m > 0:
+        raise UsageError(f"threshold-m: expected an error > 0 m, got {threshold_m:g}")
+    settings = tr.Traverse(camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m)
+    source = detections or tr.DEFAULT_TABLE
+    try:
+        settings.validate()
+        if not source.is_file():
+            raise ValueError(f"detections: expected a range-limit summary.json, {source} is not a file")
+        table = tr.DetectionTable.from_summary(source, camera, beacon=beacon)
+    except ValueError as exc:
+        raise UsageError(str(exc).splitlines()[0]) from None
+    prepare_out_dir(out)
+    with rich_progress("traverse", len(spacings) * seeds, 0) as advance:
+        summary = tr.run(
+            out, settings, spacings_m=spacings, seeds=seeds, threshold_m=threshold_m, table=table, progress=advance
+        )
+    console.print(f"traverse: {summary['spacing_answer']}; {summary['wall_s']:.0f} s; wrote {out}/report.html")
+
+
+COMMANDS = {"traverse": traverse}

@@ -1,0 +1,58 @@
+"""Wheel odometry's error model and the planar EKF against closed forms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.ekf import predict, update
+from pipeline.odometry import WheelOdometry
+
+
+def test_slip_over_counts_by_s_over_one_minus_s_and_the_noise_grows_with_the_root_of_distance():
+    odo = WheelOdometry(slip=0.2, scale_sd=0.05, heading_sd_rad=0.02)
+    d, turn = odo.report(np.full(20000, 0.5), np.zeros(20000), seed=3)
+    assert odo.bias == pytest.approx(0.25)
+    assert d.mean() == pytest.approx(0.5 * 1.25, abs=4 * 0.05 * math.sqrt(0.5) / math.sqrt(20000))
+    assert d.std() == pytest.approx(0.05 * math.sqrt(0.5), rel=0.03)  # σ_d √d
+    assert turn.std() == pytest.approx(0.02 * math.sqrt(0.5), rel=0.03)
+    assert odo.step_covariance(0.5)[0, 0] == pytest.approx(0.05**2 * 0.5 + (0.25 * 0.5) ** 2)
+    with pytest.raises(ValueError, match=r"slip: expected a slip ratio in \[0, 1\), got 1.0"):
+        WheelOdometry(slip=1.0)
+
+
+def test_predict_accumulates_a_straight_drive_as_the_sum_of_its_steps():
+    """n steps of d along x with length variance q: x = n d, Var x = n q, and a heading variance h per step
+    spreads y by Σ (distance still to go)² h (the heading error of step k moves every later step)."""
+    x, p = np.zeros(3), np.zeros((3, 3))
+    n, d, q, h = 40, 0.25, 1e-4, 1e-5
+    for _ in range(n):
+        x, p = predict(x, p, d, 0.0, np.diag([q, h]))
+    assert x == pytest.approx([n * d, 0.0, 0.0])
+    assert p[0, 0] == pytest.approx(n * q)
+    # step k's heading noise: half a step's lever on its own step (mid-step heading), then a full lever on the rest
+    lever = sum(((k + 0.5) * d) ** 2 for k in range(n))
+    assert p[1, 1] == pytest.approx(h * lever, rel=1e-9)
+    assert p[2, 2] == pytest.approx(n * h)
+
+
+def test_a_turn_moves_along_the_mid_step_heading():
+    x, _ = predict(np.array([1.0, 2.0, 0.3]), np.zeros((3, 3)), 2.0, 0.4, np.zeros((2, 2)))
+    assert x == pytest.approx([1.0 + 2 * math.cos(0.5), 2.0 + 2 * math.sin(0.5), 0.7])
+
+
+def test_an_update_is_the_information_weighted_mean():
+    """With the whole state observed, the posterior is (P⁻¹ + R⁻¹)⁻¹ and its mean the information-weighted
+    mean of prior and fix (independent closed form); a heading across ±π is averaged across it."""
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(3, 3)), rng.normal(size=(3, 3))
+    p, r = a @ a.T + np.eye(3) * 0.1, b @ b.T + np.eye(3) * 0.1
+    x, z = np.array([1.0, 2.0, 0.1]), np.array([1.5, 1.0, -0.2])
+    new, cov = update(x, p, z, r)
+    info = np.linalg.inv(p) + np.linalg.inv(r)
+    assert cov == pytest.approx(np.linalg.inv(info), abs=1e-12)
+    assert new == pytest.approx(np.linalg.solve(info, np.linalg.solve(p, x) + np.linalg.solve(r, z)), abs=1e-12)
+    wrapped, _ = update(np.array([0.0, 0.0, math.pi - 0.1]), np.eye(3), np.array([0.0, 0.0, -math.pi + 0.1]), np.eye(3))
+    assert abs(abs(wrapped[2]) - math.pi) < 1e-12
