@@ -61,6 +61,7 @@ __all__ = [
     "CONF_LEVEL",
     "INTERACTION_SUM",
     "NEGLIGIBLE",
+    "UNRELIABLE",
     "EmulatedModel",
     "Model",
     "Morris",
@@ -546,6 +547,11 @@ def _label(name: str, unknowns: Mapping[str, Unknown] | None, descriptions: Mapp
     return f"{name} ({text})" if text else name
 
 
+UNRELIABLE = 0.5
+"""LOO relative error of an emulator above which its indices are said not to be acted on (its
+held-out predictions miss by half the outputs' spread or more)."""
+
+
 def explain(
     result: Sobol | Morris,
     output: str = "the output",
@@ -588,6 +594,13 @@ def explain(
         if not isinstance(emulated, EmulatedModel):
             raise ValueError(f"emulated: expected an EmulatedModel, got {type(emulated).__name__}")
         lines.append(emulated.describe())
+        if not emulated.relative_error <= UNRELIABLE:  # (NaN: a constant output, nothing to rank)
+            lines.insert(
+                0,
+                f"do not act on this ranking yet: the emulator misses the runs it leaves out by "
+                f"{100 * emulated.relative_error:.0f} % of their spread ({emulated.runs} runs of "
+                f"{len(emulated.space.names)} inputs); more points (--points) would decide it",
+            )
     return tuple(lines)
 
 

@@ -196,6 +196,17 @@ def test_the_emulator_path_ranks_ishigami_and_reports_its_loo_error():
     assert lines[-1].startswith(f"on an emulator of 256 runs, LOO relative error {100 * em.relative_error:.1f} %")
 
 
+def test_an_emulator_that_cannot_predict_its_left_out_runs_is_said_not_to_be_acted_on():
+    """Eight runs of the Ishigami function (its sin² and x3⁴ sin terms need far more): the LOO error is
+    most of the outputs' spread, and the ranking opens with the caution; 256 runs do not."""
+    design = sobol_points(8, ISHIGAMI.dim, seed=0)
+    em = emulate(ISHIGAMI, design, ishigami(design), output="ishigami", n_restarts=1, seed=0)
+    assert em.relative_error > 0.5
+    lines = explain(sobol(em, ISHIGAMI, n=256, seed=0), "the Ishigami function", emulated=em)
+    assert lines[0].startswith(f"do not act on this ranking yet: the emulator misses the runs it leaves out by "
+                               f"{100 * em.relative_error:.0f} % of their spread (8 runs of 3 inputs)")  # fmt: skip
+
+
 def test_the_emulator_leaves_failed_runs_out():
     design = sobol_points(64, 3, seed=1)
     y = ishigami(design)
