@@ -417,6 +417,14 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
         "position errors (m), the run's slip",
         float_format="{:.3g}",
     )
+    seen = [item.split(":") for text in steps.seen for item in text.split(";") if item]
+    if seen:
+        counts = pd.DataFrame(seen, columns=["camera", "beacon", "side"]).groupby(["camera", "side"]).size()
+        rep.table(
+            counts.unstack(fill_value=0).rename_axis(columns=None).reset_index(),
+            "Which ring camera saw which side: detections over every spacing, seed and step (cam0 faces forward)",
+            float_format="{:.0f}",
+        )
     seed0 = steps[steps.seed == steps.seed.min()]
     spacings = sorted(set(seed0.spacing_m))
     fig, axes = plt.subplots(len(spacings), 1, figsize=(10, 2.2 * len(spacings)), squeeze=False)
