@@ -316,14 +316,19 @@ def simulate(t: Traverse, table: DetectionTable, spacing_m: float, seed: int) ->
 
 
 def largest_spacing(per_run: pd.DataFrame, threshold_m: float) -> dict:
-    """The largest spacing whose filter error stays under ``threshold_m`` along the whole path, per
-    seed, and over the seeds (low, high: the smallest and largest per-seed answer; None where no
-    spacing tried keeps it, "≥" where the largest tried still does)."""
+    """The largest spacing up to which every spacing tried keeps the filter's error under
+    ``threshold_m`` along the whole path, per seed (a spacing that passes beyond one that failed, by
+    luck of where the beacons fell, does not count), and over the seeds (low, high: the smallest and
+    largest per-seed answer; None where no spacing tried keeps it, "≥" where the largest tried does)."""
     spacings = sorted(set(per_run.spacing_m))
     per_seed = {}
     for seed, g in per_run.groupby("seed"):
-        ok = [s for s in spacings if float(g[g.spacing_m == s].filter_max_error_m.iloc[0]) <= threshold_m]
-        per_seed[int(seed)] = max(ok) if ok else None
+        answer = None
+        for s in spacings:
+            if float(g[g.spacing_m == s].filter_max_error_m.iloc[0]) > threshold_m:
+                break
+            answer = s
+        per_seed[int(seed)] = answer
     values = [v for v in per_seed.values() if v is not None]
     return {
         "threshold_m": threshold_m,
@@ -340,8 +345,11 @@ def spacing_text(answer: dict) -> str:
     if answer["high_m"] is None:
         return f"no spacing tried keeps the error under {answer['threshold_m']:g} m"
     top = f"≥ {answer['high_m']:g}" if answer["at_least"] else f"{answer['high_m']:g}"
+    seeds, under = len(answer["per_seed"]), f"error under {answer['threshold_m']:g} m"
+    if answer["low_m"] == answer["high_m"]:
+        return f"{top} m at each of {seeds} seeds ({under})"
     low = "none" if answer["low_m"] is None else f"{answer['low_m']:g}"
-    return f"{low} to {top} m over {len(answer['per_seed'])} seeds (error under {answer['threshold_m']:g} m)"
+    return f"{low} to {top} m over {seeds} seeds ({under})"
 
 
 def run(
