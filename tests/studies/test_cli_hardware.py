@@ -69,3 +69,25 @@ def test_a_bad_field_names_file_and_field(work, tmp_path):
 def test_a_good_file_reaches_the_work(work):
     code, _out, err = invoke(["--beacon-file", BEACON, "capture", "--camera-file", CAMERA, "--out", "o"])
     assert code == "work", err
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda t: t.replace("\narm_length_mm", "\n# arm_length_mm"),
+         "arm_length_mm: expected a number > 0 and <= 2000, got 'nothing (missing)'"),
+        (lambda t: t.replace("lit_face_diameter_mm = { value = 12.0", "lit_face_diameter_mm = { value = -12.0"),
+         "lit_face_diameter_mm: expected a number > 0"),
+        (lambda t: t + '\n[leds]\nred = "cree-c503t-nope"\n', "leds.red: expected one of red, green"),
+        (lambda t: t + '\n[leds]\nred = "cree-c503t-gan"\n', "leds.red: expected a red part for the red side"),
+    ],
+)  # fmt: skip
+def test_a_bad_design_file_is_one_line_naming_the_field_and_nothing_is_written(work, tmp_path, edit, message):
+    """A candidate beacon (missing field, negative size, unknown LED part, a part of another colour) given
+    to a study: one line naming the file's field, before any work, no output folder."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edit(Path(BEACON).read_text()))
+    code, _out, err = invoke(["study", "range-limit", "--beacon-file", str(bad), "--out", "o"])
+    line = assert_one_line_error(code, err)
+    assert f"beacon file bad.toml: {message}" in line, line
+    assert not (work / "o").exists()
