@@ -115,6 +115,13 @@ class LED:
                 f"for the {self.colour} LED, got {current_mA!r}"
             )
 
+    def current_for_flux_mA(self, flux_W: float) -> float:
+        """The drive current whose radiant flux is ``flux_W`` (W), mA: the inverse of
+        :meth:`radiant_flux_W`, I_F = I_ref (Φ / Φ_ref)^(1/γ); not checked against the maximum."""
+        if not (math.isfinite(flux_W) and flux_W > 0):
+            raise ValueError(f"flux_W: expected a radiant flux > 0 W, got {flux_W!r}")
+        return self.reference_current_mA * (flux_W / self.radiant_flux_W()) ** (1.0 / self.current_exponent)
+
     def radiant_intensity_W_sr(self, current_mA: float | None = None) -> float:
         """On-axis radiant intensity I₀ at the drive current, W·sr⁻¹."""
         current = self.reference_current_mA if current_mA is None else current_mA

@@ -62,6 +62,7 @@ __all__ = [
     "SPACE",
     "Budget",
     "Target",
+    "current_for_side_power",
     "evaluate_design",
     "run",
     "scored_far_limit",
@@ -182,6 +183,12 @@ def side_power_mW(side: str, current_mA: float, part: str | None = None) -> floa
     return MARKERS * 1e3 * led_part(part or side, side).radiant_flux_W(current_mA)
 
 
+def current_for_side_power(side: str, power_mW: float, part: str | None = None) -> float:
+    """The drive current at which one side's five LEDs (``part``, default the colour's) emit ``power_mW``
+    of optical power, mA (:meth:`scenes.led.LED.current_for_flux_mA`: not linear where γ ≠ 1)."""
+    return led_part(part or side, side).current_for_flux_mA(power_mW / (MARKERS * 1e3))
+
+
 def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
     return StudyOptions(
         cameras=(target.camera,),
@@ -239,9 +246,9 @@ def scored_far_limit(rec: dict, at: str) -> float:
 
 def v2_at(budget: Budget, target: Target) -> dict:
     """V2 as built at the drive that spends the budget's power per side (its datasheet maximum if lower)."""
-    led = led_for_side(target.side)
-    per_mA = side_power_mW(target.side, 1.0)  # radiant flux is linear in the drive below the reference current
-    current = min(budget.side_power_mW / per_mA, led.reference_current_mA)
+    current = min(
+        current_for_side_power(target.side, budget.side_power_mW), led_for_side(target.side).reference_current_mA
+    )
     v2 = BeaconParameters.of("v2")
     return {
         "arm_length_mm": v2.arm_length_mm,

@@ -91,3 +91,12 @@ def test_the_alternative_parts_reproduce_their_sheet():
         led_part("cree-c503t-ban", "green")
     with pytest.raises(ValueError, match=r"led: expected one of red, green, .*, got 'nope'"):
         led_part("nope")
+
+
+@pytest.mark.parametrize("colour", list(LEDS))
+def test_the_current_for_a_flux_inverts_the_drive_law(colour):
+    led = LEDS[colour]
+    for current in (0.5, 2.0, 13.0):
+        assert led.current_for_flux_mA(led.radiant_flux_W(current)) == pytest.approx(current, rel=1e-12)
+    with pytest.raises(ValueError, match=r"flux_W: expected a radiant flux > 0 W, got 0"):
+        led.current_for_flux_mA(0)
