@@ -31,6 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from camera_models.lens_variant import register_lens_variant
@@ -342,8 +343,11 @@ def _report(out: Path, summary: dict) -> None:
         lead.append(
             f"Farthest on the front: {_far(m['far_limit_m'])} with {d['arm_length_mm']:.0f} mm arms, the centre "
             f"marker {d['out_of_plane_mm']:.0f} mm out, {d['lit_face_diameter_mm']:.0f} mm lit faces, "
-            f"{d['led_current_mA']:.3g} mA, {'foam + ' if d['foam'] else ''}{d['paper_sheets']} sheets "
-            f"({m['side_power_mW']:.3g} mW per side, {m['span_mm']:.0f} mm span)."
+            f"{d['led_current_mA']:.3g} mA, {'foam + ' if d['foam'] else ''}{d['paper_sheets']} "
+            f"sheet{'' if d['paper_sheets'] == 1 else 's'}"
+            + (f", the {d['led']} LED part" if "led" in d else "")
+            + (f", a {d['focal_length_mm']:.3g} mm lens" if "focal_length_mm" in d else "")
+            + f" ({m['side_power_mW']:.3g} mW per side, {m['span_mm']:.0f} mm span)."
         )
     else:
         lead.append(summary["infeasible"] or "No design met the budget.")
@@ -359,9 +363,46 @@ def _report(out: Path, summary: dict) -> None:
         labels=columns,
         float_format="{:.3g}",
     )
+    scored = {
+        "nominal": "far limits of the nominal point (noise and pose only)",
+        "low": "far limits scored at the lower end of each design's noise + physics interval",
+        "median": "far limits scored at the median over the points of the unknowns",
+    }[t.get("at", "nominal")]
     rep.text(
-        f"Run time {summary['wall_s']:.0f} s; far limits of the nominal point (noise and pose only); a design "
-        "still working at the farthest range its run tried counts as that range: its limit is at least that.",
+        f"Run time {summary['wall_s']:.0f} s; {scored}, the worst of the yaws; a design still working at the "
+        "farthest range its run tried counts as that range: its limit is at least that.",
         note=True,
     )
+    if (out / "trials.csv").is_file():
+        rep.figure(
+            _trials_figure(pd.read_csv(out / "trials.csv"), v2, b["side_power_mW"]),
+            "Every design evaluated: far limit against power per side (marker area: span), the Pareto front ringed, "
+            "V2 as built at the budget a star, the budget a dashed line",
+        )
     rep.write(out / "report.html")
+
+
+def _trials_figure(trials: pd.DataFrame, v2: dict, budget_mW: float):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    ok = trials[trials.status == "ok"] if "status" in trials else trials
+    size = 12 + 60 * (ok.span_mm - ok.span_mm.min()) / max(float(np.ptp(ok.span_mm)), 1e-9)
+    ax.scatter(ok.side_power_mW, ok.far_limit_m, s=size, c="C0", alpha=0.6, label="designs")
+    front = ok[ok.on_front.astype(bool)]
+    ax.scatter(front.side_power_mW, front.far_limit_m, s=120, facecolors="none", edgecolors="k", label="front")
+    ax.scatter([v2["metrics"]["side_power_mW"]], [v2["metrics"]["far_limit_m"]], marker="*", s=200, c="C3",
+               label="V2 as built")  # fmt: skip
+    ax.axvline(budget_mW, color="0.5", ls="--", lw=1)
+    ax.set_xscale("log")
+    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    ax.xaxis.set_major_formatter(plain)
+    ax.xaxis.set_minor_formatter(plain)
+    ax.set_xlabel("optical power per side, mW")
+    ax.set_ylabel("far limit, m")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
