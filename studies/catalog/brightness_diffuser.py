@@ -244,7 +244,8 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
     rec = pd.DataFrame(summary["recommended"])
     if "diffuser" in rec:
         rec = rec.assign(
-            correct=[f"{d:.0f} of {n:.0f}" if n == n else "–" for d, n in zip(rec.successes, rec.frames, strict=True)]
+            correct=[f"{d:.0f} of {n:.0f}" if n == n else "–" for d, n in zip(rec.successes, rec.frames, strict=True)],
+            **{c: rec[c].fillna("–") for c in ("p_interval_physics", "window_points") if c in rec},
         )
         rep.table(
             rec[
@@ -259,6 +260,7 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
                     "p_low",
                     "core_saturation",
                     "window",
+                    *(c for c in ("p_interval_physics", "window_points") if c in rec),
                 ]
             ],
             "Per camera and side (best tracker): the window's setting with the least clipping",
@@ -270,6 +272,8 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
                 "p_low": "P(correct), Wilson 95 % lower bound",
                 "core_saturation": "cores clipped (worst range)",
                 "window": "settings in the window",
+                "p_interval_physics": "lowest P(correct), noise + physics",
+                "window_points": "in the window at points",
             },
             formats={
                 "led_current_mA": "{:g}",
