@@ -31,7 +31,8 @@ def traverse(
         Path | None,
         typer.Option(
             "--detections",
-            help="A range-limit summary.json whose working ranges give the camera's detection probability.",
+            help="A range-limit summary.json whose measured P(correct) per range and yaw is the camera's detection "
+            "probability.",
             show_default="results/full/range-limit.summary.json",
         ),
     ] = None,
