@@ -265,8 +265,11 @@ def _detections(
     return out
 
 
-def simulate(t: Traverse, table: DetectionTable, spacing_m: float, seed: int) -> pd.DataFrame:
-    """One traverse at one beacon spacing (m): a row per step (module docstring)."""
+def simulate(
+    t: Traverse, table: DetectionTable, spacing_m: float, seed: int, *, covariances: dict | None = None
+) -> pd.DataFrame:
+    """One traverse at one beacon spacing (m): a row per step (module docstring). ``covariances``:
+    the CRLB per (range, yaw) already computed for ``t`` (shared by the runs of one traverse)."""
     ground = np.random.default_rng(seed)  # the robot's slip and odometry noise: the same at every spacing
     rng = np.random.default_rng([seed, round(spacing_m * 1000)])  # what the cameras see
     slip_low, slip_high = LOOSE_SAND["slip"]
@@ -279,7 +282,7 @@ def simulate(t: Traverse, table: DetectionTable, spacing_m: float, seed: int) ->
     d_hat, turn_hat = odo.report(steps, turns, seed=int(ground.integers(2**32)))
     x_odo, x_ekf = truth[0].copy(), truth[0].copy()  # both start at the known start pose
     p_ekf = np.diag([1e-4, 1e-4, 1e-6])
-    cache: dict = {}
+    cache: dict = {} if covariances is None else covariances
     rows = []
     for i in range(len(truth)):
         if i:
@@ -365,10 +368,10 @@ def run(
     """Every spacing × seed (module docstring); returns the summary."""
     t0 = time.perf_counter()
     out = Path(out)
-    frames = []
+    frames, covariances = [], {}  # the CRLB at a range and yaw is the same in every run
     for spacing in spacings_m:
         for seed in range(seeds):
-            frames.append(simulate(t, table, float(spacing), seed))
+            frames.append(simulate(t, table, float(spacing), seed, covariances=covariances))
             if progress:
                 progress()
     steps = pd.concat(frames, ignore_index=True)
