@@ -173,6 +173,7 @@ def capture(
     *,
     noise: bool = True,
     reference: bool = False,
+    view: NDArray[np.float64] | None = None,
 ) -> Capture:
     """Simulate the frame the camera records for a render.
 
@@ -198,11 +199,14 @@ def capture(
         Use the reference implementations the fast path replaced (numpy sensor,
         :func:`camera_models.sensor.expose_numpy`; float ISP, :mod:`camera_models.isp_reference`):
         the same distributions, other random numbers; for equivalence tests and the benchmark.
+    view
+        The camera turned off the render's axis (:meth:`scenes.scenario.Scenario.view_rotation`;
+        :func:`camera_models.optics.optical_image`); None: not turned.
     """
     if not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
     n = camera.lens.f_number if f_number is None else f_number
-    opt = optical_image(radiance, camera, 1.0, n)  # electrons per second
+    opt = optical_image(radiance, camera, 1.0, n, view=view)  # electrons per second
     bg = background_electrons_per_s(background, camera, n) if background is not None else None
     if exposure is None:
         if camera.exposure.mode == "auto":

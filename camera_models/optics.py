@@ -30,7 +30,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -291,16 +291,83 @@ class OpticalImage:
     spilled_electrons_rgb: NDArray[np.float64] | None = None
 
 
-def distortion_resample(image: NDArray[np.float32], grid: PixelGrid, camera: Camera) -> NDArray[np.float64]:
-    """Resample a pinhole render onto the distorted sensor (same sub-pixel grid), bilinear.
+def _pinhole_rays(uv_px: NDArray[np.float64], grid: PixelGrid) -> NDArray[np.float64]:
+    """Directions (…, 3) in the camera frame of pinhole pixel positions (…, 2) (z = 1)."""
+    cx, cy = grid.principal_point_px
+    f = grid.focal_length_px
+    return np.stack([(uv_px[..., 0] - cx) / f, (uv_px[..., 1] - cy) / f, np.ones(uv_px.shape[:-1])], axis=-1)
 
-    Each output sub-pixel centre is mapped to its undistorted position; radiance is
-    conserved along rays, so values are taken, not rescaled. Outside the render: 0.
+
+def _pinhole_pixels(rays: NDArray[np.float64], grid: PixelGrid) -> NDArray[np.float64]:
+    """Pinhole pixel positions (…, 2) of directions (…, 3); NaN for a direction behind the camera."""
+    cx, cy = grid.principal_point_px
+    f = grid.focal_length_px
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.where(rays[..., 2] > 1e-9, rays[..., 2], np.nan)
+        return np.stack([cx + f * rays[..., 0] / z, cy + f * rays[..., 1] / z], axis=-1)
+
+
+def turned_grid(grid: PixelGrid, camera: Camera, view: NDArray[np.float64]) -> PixelGrid:
+    """The crop of the frame a render on ``grid`` covers once the camera is turned off the render's
+    axis: ``view`` (3 × 3) takes a direction in the camera's frame to the render's
+    (:meth:`scenes.scenario.Scenario.view_rotation`). The render's border, every sub-pixel of it,
+    mapped through ``view`` and the real lens into the frame: the box around it, clipped to the
+    frame, same oversampling.
+
+    Raises
+    ------
+    ValueError
+        When the render falls behind the camera or outside its frame.
+    """
+    s = grid.oversampling
+    u, v = grid.subpixel_centres_px()
+    border = np.concatenate(
+        [
+            np.stack([u, np.full(u.size, v[0])], axis=-1),
+            np.stack([u, np.full(u.size, v[-1])], axis=-1),
+            np.stack([np.full(v.size, u[0]), v], axis=-1),
+            np.stack([np.full(v.size, u[-1]), v], axis=-1),
+        ]
+    )
+    pinhole = _pinhole_pixels(_pinhole_rays(border, grid) @ np.asarray(view), grid)  # rows: d_cam = viewᵀ d_render
+    if not np.all(np.isfinite(pinhole)):
+        raise ValueError("pan_deg: the beacon lies behind the turned camera (|turn| too large)")
+    mapping = RadialMapping(camera)
+    uv = mapping.distort_points_px(pinhole)
+    back = mapping.undistort_points_px(uv)  # beyond the lens's one-to-one field the mapping folds back
+    if not np.all(np.hypot(*(back - pinhole).T) < 0.5):
+        raise ValueError(f"pan_deg: the turned {camera.name} does not see the beacon: it falls outside its frame")
+    x0 = max(0, math.floor(float(uv[:, 0].min()) + 0.5))  # the pixel each border sub-pixel falls in
+    y0 = max(0, math.floor(float(uv[:, 1].min()) + 0.5))
+    x1 = min(grid.frame_width_px, math.floor(float(uv[:, 0].max()) + 0.5) + 1)
+    y1 = min(grid.frame_height_px, math.floor(float(uv[:, 1].max()) + 0.5) + 1)
+    if x1 <= x0 or y1 <= y0 or not np.all(np.isfinite(uv)):
+        raise ValueError(f"pan_deg: the turned {camera.name} does not see the beacon: it falls outside its frame")
+    return replace(grid, x0=x0, y0=y0, width=x1 - x0, height=y1 - y0, oversampling=s)
+
+
+def distortion_resample(
+    image: NDArray[np.float32],
+    grid: PixelGrid,
+    camera: Camera,
+    *,
+    out: PixelGrid | None = None,
+    view: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Resample a pinhole render onto the distorted sensor, bilinear.
+
+    Each output sub-pixel centre (on ``out``, default the render's own ``grid``) is mapped to its
+    undistorted position and, for a camera turned off the render's axis by ``view`` (see
+    :func:`turned_grid`), along its ray into the render's camera; radiance is conserved along rays,
+    so values are taken, not rescaled. Outside the render: 0.
     """
 
-    u, v = grid.subpixel_centres_px()
+    out = grid if out is None else out
+    u, v = out.subpixel_centres_px()
     uu, vv = np.meshgrid(u, v)
     und = RadialMapping(camera).undistort_points_px(np.stack([uu, vv], axis=-1))
+    if view is not None:
+        und = _pinhole_pixels(_pinhole_rays(und, grid) @ np.asarray(view).T, grid)
     s = grid.oversampling
     # sub-pixel index of camera-pixel coordinate p: (p - x0 + 0.5) * s - 0.5
     col = (und[..., 0] - grid.x0 + 0.5) * s - 0.5
@@ -316,6 +383,7 @@ def optical_image(
     f_number: float | None = None,
     *,
     effects: OpticsEffects | None = None,
+    view: NDArray[np.float64] | None = None,
 ) -> OpticalImage:
     """Mean electrons per pixel and channel for a render seen through ``camera``'s lens.
 
@@ -332,11 +400,18 @@ def optical_image(
     effects
         Defocus, veiling glare and pixel crosstalk to apply (default: the camera's
         ``effects``, which are none unless a task switches them on).
+    view
+        For a camera turned off the render's axis: the rotation (3 × 3) from the camera's frame to
+        the render's (:meth:`scenes.scenario.Scenario.view_rotation`); the image is then made on the
+        crop of the frame where the turned camera sees the render (:func:`turned_grid`), with the
+        distortion and relative illumination of that place. None: the render's own crop.
     """
     if not math.isfinite(exposure_s) or exposure_s <= 0:
         raise ValueError(f"exposure_s: expected a time > 0 s, got {exposure_s!r}")
     n = camera.lens.f_number if f_number is None else check_f_number(f_number)
-    grid = radiance.grid
+    source = radiance.grid
+    grid = source if view is None else turned_grid(source, camera, view)
+    turn = None if view is None else (tuple(np.round(np.asarray(view), 12).ravel().tolist()), grid)
     effects = camera.effects if effects is None else effects
     defocus_subpx = _defocus_subpixels(radiance, camera, n, effects)
     factor = camera_equation_factor_m2_sr(camera.lens, n, camera.pixel_area_m2) * exposure_s
@@ -355,14 +430,17 @@ def optical_image(
             continue
         if comp.unit_key is not None and comp.unit_image is not None:
             # linear in radiance: the lens's work on the unit render is done once and rescaled
-            cache_key = (comp.unit_key, camera.name, n, grid)
+            cache_key = (comp.unit_key, camera.name, n, source)
+            if turn is not None:
+                cache_key += (("view", turn),)
             if defocus_subpx > 0:  # the only effect applied per component (glare and crosstalk act on the sum)
                 cache_key += (("defocus_subpx", defocus_subpx),)
             binned = _UNIT_OPTICS.get(cache_key)
             if binned is None:
                 binned = _lens_image(
-                    comp.unit_image, comp.spectral_shape_per_nm, grid, camera, n, illumination(), defocus_subpx
-                )
+                    comp.unit_image, comp.spectral_shape_per_nm, source, camera, n, illumination(), defocus_subpx,
+                    out=grid, view=view,
+                )  # fmt: skip
                 _UNIT_OPTICS[cache_key] = binned
                 while len(_UNIT_OPTICS) > 32:
                     _UNIT_OPTICS.pop(next(iter(_UNIT_OPTICS)))
@@ -370,7 +448,15 @@ def optical_image(
         else:
             out += (
                 _lens_image(
-                    comp.image_W_m2_sr, comp.spectral_shape_per_nm, grid, camera, n, illumination(), defocus_subpx
+                    comp.image_W_m2_sr,
+                    comp.spectral_shape_per_nm,
+                    source,
+                    camera,
+                    n,
+                    illumination(),
+                    defocus_subpx,
+                    out=grid,
+                    view=view,
                 )
                 * factor
             )
@@ -421,13 +507,17 @@ _UNIT_OPTICS: dict[tuple, NDArray[np.float64]] = {}
 """Lens images of unit renders (see :func:`optical_image`), most recent 32."""
 
 
-def _lens_image(image, shape_per_nm, grid, camera: Camera, n: float, ri, defocus_subpx: float = 0.0):
-    """Distortion, PSF per channel (with a defocus pillbox of ``defocus_subpx`` sub-pixels'
-    diameter when > 0), relative illumination and binning of one radiance image:
-    (height, width, 3) electrons per pixel per unit of the camera-equation factor."""
+def _lens_image(
+    image, shape_per_nm, source, camera: Camera, n: float, ri, defocus_subpx: float = 0.0, *, out=None, view=None
+):
+    """Distortion (from the render on ``source`` to the crop ``out``, turned by ``view``: see
+    :func:`distortion_resample`), PSF per channel (with a defocus pillbox of ``defocus_subpx``
+    sub-pixels' diameter when > 0), relative illumination and binning of one radiance image:
+    (height, width, 3) electrons per pixel of ``out`` per unit of the camera-equation factor."""
+    grid = source if out is None else out
     s = grid.oversampling
     qe = camera.sensor.qe_rgb
-    image = distortion_resample(image, grid, camera)
+    image = distortion_resample(image, source, camera, out=grid, view=view)
     e_per_j = electrons_per_joule(shape_per_nm, qe)
     out = np.empty((grid.height, grid.width, 3))
     for c in range(3):

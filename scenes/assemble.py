@@ -224,7 +224,7 @@ def crop_box(scenario: Scenario) -> CropBox:
         reach = design.arm_length_m + design.housing_radius_m + design.housing_depth_m
         ext = design.d_t_m + 0.01
         corners = np.array([[x, y, z] for x in (-ext, ext) for y in (-ext, ext) for z in (-reach, reach)])
-    pose = scenario.camera_pose()
+    pose = scenario.render_pose()
     if np.any(pose.world_to_camera(corners)[:, 2] <= 0.05):
         raise ScenarioError(f"range_m: the camera at {scenario.range_m} m is inside or too close to the beacon")
     uv = project(geom, pose, corners)
@@ -238,10 +238,12 @@ def crop_box(scenario: Scenario) -> CropBox:
     return CropBox(x0, y0, x1 - x0, y1 - y0)
 
 
-def sensor_spec(scenario: Scenario) -> dict:
-    """The camera of a scene spec: pose, field of view, oversampled film and the crop."""
+def sensor_spec(scenario: Scenario, *, turned: bool = False) -> dict:
+    """The camera of a scene spec: pose, field of view, oversampled film and the crop. The pose is
+    the render's (:meth:`scenes.scenario.Scenario.render_pose`), or with ``turned`` the camera's
+    own (a whole-frame view of the room)."""
     geom, s = scenario.geometry, scenario.render.oversampling
-    pose = scenario.camera_pose()
+    pose = scenario.camera_pose() if turned else scenario.render_pose()
     crop = crop_box(scenario)
     return {
         "position": pose.position_m.tolist(),
@@ -258,7 +260,7 @@ def room_spec(scenario: Scenario) -> dict:
     ceiling) seen by the same camera; path length that of the ambient light."""
     env = scenario.env
     return {
-        "sensor": sensor_spec(scenario),
+        "sensor": sensor_spec(scenario, turned=True),
         "materials": {"wall": env.wall_reflectance, "floor": env.floor_reflectance},
         "shapes": environment_shapes(scenario),
         "max_depth": scenario.render.ambient_max_depth,

@@ -31,7 +31,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from scenes.assemble import room_spec, scene_spec
+from scenes.assemble import room_spec, scene_spec, sensor_spec
 from scenes.mitsuba_variant import select_variant
 from scenes.radiance import PixelGrid, SpectralRadiance
 from scenes.render import RENDER_VERSION, _scaled_component, render_unit_groups
@@ -64,7 +64,8 @@ def room_scenario(scenario: Scenario) -> Scenario:
     """The band representative of ``scenario`` whose room the ``room`` background renders:
     same beacon design (its target offset places marker 1), camera, environment and seed;
     side ``red`` (the room turns with the side, the camera's view of it does not), range,
-    yaw and height rounded to their bands, bare black-housed markers at the datasheet drive."""
+    yaw and height rounded to their bands, the camera's turn (pan, tilt) to :data:`YAW_STEP_DEG`,
+    bare black-housed markers at the datasheet drive."""
     step = math.log1p(RANGE_STEP)
     range_m = math.exp(round(math.log(scenario.range_m) / step) * step)
     yaw = min(90.0, max(-90.0, YAW_STEP_DEG * round(scenario.yaw_deg / YAW_STEP_DEG)))
@@ -72,7 +73,10 @@ def room_scenario(scenario: Scenario) -> Scenario:
     if abs(height) >= range_m:
         height = scenario.camera_height_m
     render = replace(scenario.render, oversampling=1)
+    pan, tilt = (YAW_STEP_DEG * round(a / YAW_STEP_DEG) for a in (scenario.pan_deg, scenario.tilt_deg))
     return Scenario(
+        pan_deg=min(85.0, max(-85.0, pan)),
+        tilt_deg=min(85.0, max(-85.0, tilt)),
         beacon=scenario.beacon,
         side="red",
         range_m=range_m,
@@ -103,6 +107,7 @@ def render_background(
     seed = scenario.render.seed
     if scenario.render.background == "geometry":
         spec = scene_spec(scenario)
+        spec["sensor"] = sensor_spec(scenario, turned=True)  # the whole frame is the camera's own view
         tag: tuple = ("background",)
     else:
         spec = room_spec(room_scenario(scenario))

@@ -114,7 +114,7 @@ def face_discs(scenario: Scenario, crop_x0_px: int, crop_y0_px: int) -> list[Fac
     """Every lit face of the beacon (all four sides) projected on the crop whose top-left
     camera pixel is (``crop_x0_px``, ``crop_y0_px``), in sub-pixels (pinhole camera, as rendered)."""
     design, geom, s = scenario.design, scenario.geometry, scenario.render.oversampling
-    pose = scenario.camera_pose()
+    pose = scenario.render_pose()
     cx, cy = geom.principal_point_px
     f = geom.focal_length_px
     r_face = design.lit_face_diameter_m / 2

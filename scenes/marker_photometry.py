@@ -42,9 +42,9 @@ def marker_figures(scenario: Scenario, radiance: SpectralRadiance | None = None)
             settings=NearFieldSettings(spp=scenario.render.near_field_spp),
         )
     rot, _ = scenario.target_to_world()
-    cam = scenario.camera_pose().position_m
+    cam = scenario.render_pose().position_m
     positions = scenario.marker_positions_world_m()
-    uv = project(scenario.geometry, scenario.camera_pose(), positions)
+    uv = project(scenario.geometry, scenario.render_pose(), positions)
     spacing = min(np.hypot(*(uv[i] - uv[j])) for i in range(5) for j in range(i + 1, 5))
     out = []
     for k, marker in enumerate(design.markers):
@@ -79,7 +79,7 @@ def side_to_centre_flux(scenario: Scenario, cache=None) -> float:
     """Mean irradiance at the camera's pupil from markers 2-5 over that from marker 1
     (dimensionless), measured on the render of the scenario's side (its LEDs only)."""
     radiance = render(scenario, cache, groups=[f"led:{scenario.side}"])
-    uv = project(scenario.geometry, scenario.camera_pose(), scenario.marker_positions_world_m())
+    uv = project(scenario.geometry, scenario.render_pose(), scenario.marker_positions_world_m())
     spacing = min(np.hypot(*(uv[i] - uv[j])) for i in range(5) for j in range(i + 1, 5))
     flux = [radiance.irradiance_at_pupil_W_m2(u, v, 0.45 * spacing, f"led:{scenario.side}") for u, v in uv]
     return float(np.mean(flux[1:]) / flux[0])

@@ -7,7 +7,13 @@ marker 1. ``yaw_deg`` is the camera's azimuth about the target's vertical axis, 
 from marker 1: 0 faces the target squarely, positive puts the camera toward the
 target's +y (the viewer's left), which is the same as turning the beacon by −yaw about
 its vertical (Z-down) axis with the camera fixed. ``camera_height_m`` raises the camera
-above marker 1 (positive up). The camera looks at marker 1 with its image-up along −Z.
+above marker 1 (positive up). The camera looks at marker 1 with its image-up along −Z, unless
+``pan_deg`` or ``tilt_deg`` turn it: the camera's axis then points ``pan_deg`` to its right
+(clockwise seen from above) and ``tilt_deg`` up from the direction to marker 1, with no roll, so
+the beacon appears off the image centre (:meth:`Scenario.camera_pose`). The render is made from
+the unturned pose (:meth:`Scenario.render_pose`), where the beacon sits on the axis, and the
+camera models place it in the turned camera's frame (:meth:`Scenario.view_rotation`): a pan
+changes what the lens does to the beacon's light (distortion, vignetting), not the render.
 """
 
 from __future__ import annotations
@@ -162,6 +168,10 @@ class Scenario:
         LED drive current, mA; ``None`` means the datasheet test current.
     camera_height_m
         Camera height above marker 1, m.
+    pan_deg, tilt_deg
+        The camera's optical axis turned from marker 1, degrees in (−90, 90): ``pan_deg`` to the
+        camera's right (the beacon appears left of the image centre), ``tilt_deg`` up (the beacon
+        appears below it); 0, 0: looking at marker 1.
     housing
         Housing finish, ``white`` or ``black``.
     foam, paper_sheets, paper_colour
@@ -184,6 +194,8 @@ class Scenario:
     environment: str = "dark"
     led_current_mA: float | None = None
     camera_height_m: float = 0.0
+    pan_deg: float = 0.0
+    tilt_deg: float = 0.0
     housing: str = "black"
     foam: bool = False
     paper_sheets: int = 0
@@ -218,6 +230,10 @@ class Scenario:
             raise ScenarioError(
                 f"camera_height_m: expected |height| < range_m ({self.range_m} m), got {self.camera_height_m!r}"
             )
+        for name in ("pan_deg", "tilt_deg"):
+            value = getattr(self, name)
+            if not _finite(value) or abs(value) >= 90:
+                raise ScenarioError(f"{name}: expected an angle in (-90, 90) degrees, got {value!r}")
         if self.housing not in HOUSING_FINISHES:
             raise ScenarioError(f"housing: expected one of {', '.join(HOUSING_FINISHES)}, got {self.housing!r}")
         try:
@@ -319,11 +335,30 @@ class Scenario:
         horizontal = math.sqrt(self.range_m**2 - self.camera_height_m**2)
         return np.array([horizontal * math.cos(yaw), horizontal * math.sin(yaw), -self.camera_height_m])
 
-    def camera_pose(self) -> CameraPose:
-        """Camera pose in the beacon frame (looking at marker 1, image-up along −Z)."""
+    def render_pose(self) -> CameraPose:
+        """The pose the beacon is rendered from, in the beacon frame: at the camera, looking at
+        marker 1, image-up along −Z (the camera itself when it is not turned)."""
         rot, trans = self.target_to_world()
         position = rot @ self.camera_position_target_m() + trans
         return CameraPose.look_at(position, trans)
+
+    @property
+    def turned(self) -> bool:
+        """Whether the camera's axis is turned off marker 1 (``pan_deg`` or ``tilt_deg`` not 0)."""
+        return self.pan_deg != 0 or self.tilt_deg != 0
+
+    def camera_pose(self) -> CameraPose:
+        """The camera's pose in the beacon frame: :meth:`render_pose` turned by ``pan_deg`` and
+        ``tilt_deg`` (:meth:`scenes.view.CameraPose.turned`)."""
+        pose = self.render_pose()
+        return pose.turned(self.pan_deg, self.tilt_deg) if self.turned else pose
+
+    def view_rotation(self) -> np.ndarray | None:
+        """Rotation (3 × 3) taking a direction in the camera's frame to the render's camera frame
+        (:meth:`render_pose`), or None when the camera is not turned."""
+        if not self.turned:
+            return None
+        return self.render_pose().rotation @ self.camera_pose().rotation.T
 
     def marker_positions_world_m(self) -> np.ndarray:
         """Lit-face centres of markers 1-5 in the beacon frame, shape (5, 3), m."""
@@ -332,12 +367,16 @@ class Scenario:
 
     # -- identity ---------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """Plain-data form (JSON-able); ``data`` as a mapping, left out when empty (so scenarios
-        without overrides keep the keys they had before it existed)."""
+        """Plain-data form (JSON-able); ``data`` as a mapping, left out when empty, and ``pan_deg``,
+        ``tilt_deg`` left out at 0 (so scenarios without them keep the keys they had before they
+        existed)."""
         out = dataclasses.asdict(self)
         out.pop("data")
         if self.data:
             out["data"] = dict(self.data)
+        for name in ("pan_deg", "tilt_deg"):  # left out at 0, so unturned scenarios keep their keys
+            if not out[name]:
+                out.pop(name)
         return out
 
     @classmethod

@@ -117,6 +117,32 @@ class CameraPose:
         down = np.cross(forward, right)
         return cls(position, np.stack([right, down, forward]))
 
+    def turned(self, pan_deg: float, tilt_deg: float, up=(0.0, 0.0, -1.0)) -> CameraPose:
+        """The same camera with its optical axis turned, no roll: ``pan_deg`` toward the camera's
+        right about ``up`` (clockwise seen from above), then ``tilt_deg`` up, both from this pose's
+        axis in azimuth and elevation about ``up``; a point on this pose's axis then appears
+        ``pan_deg`` left of and ``tilt_deg`` below the new axis.
+
+        >>> pose = CameraPose.look_at((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+        >>> np.round(pose.turned(90.0, 0.0).rotation[2], 12) + 0.0  # now looking along world +y
+        array([0., 1., 0.])
+        """
+        u = -np.asarray(up, dtype=np.float64)  # "down" in the world frame
+        u /= np.linalg.norm(u)
+        forward = self.rotation[2]
+        elevation = math.asin(float(np.clip(-forward @ u, -1.0, 1.0)))
+        horizontal = forward + math.sin(elevation) * u  # forward's part perpendicular to up
+        if np.linalg.norm(horizontal) < 1e-9:
+            raise ValueError("camera pose: cannot pan a camera that looks straight up or down")
+        east = horizontal / np.linalg.norm(horizontal)
+        right = np.cross(u, east)  # the camera's right at zero roll
+        pan, el = math.radians(pan_deg), elevation + math.radians(tilt_deg)
+        if abs(el) >= math.pi / 2:
+            raise ValueError(f"tilt_deg: the turned axis would point straight up or down ({math.degrees(el):.1f}°)")
+        heading = math.cos(pan) * east + math.sin(pan) * right
+        direction = math.cos(el) * heading - math.sin(el) * u
+        return CameraPose.look_at(self.position_m, self.position_m + direction, up)
+
     def world_to_camera(self, points_m: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points (…, 3) from the world frame to the camera frame, m."""
         return (np.asarray(points_m) - self.position_m) @ self.rotation.T

@@ -151,6 +151,7 @@ def capture_frame(task: FrameTask | dict) -> CapturedFrame:
         full=task.is_full_frame,
         noise=task.with_noise,
         reference=bool(task.reference_camera),
+        view=scenario.view_rotation(),
     )
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)

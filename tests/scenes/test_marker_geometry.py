@@ -105,3 +105,24 @@ def test_bare_led_centroids_match_emission_weighted_projection(range_m, yaw):
     centroid = _centroids(image, radiance.grid, uv, _window(uv))
     expected = _emission_weighted_projection(scenario)
     assert np.hypot(*(centroid - expected).T).max() < 0.1
+
+
+def test_turned_camera_pose_projects_marker_one_off_centre():
+    """Pan p and tilt t: marker 1 at (cx − f·tan p, cy + f·tan t / cos p) in the pinhole camera
+    (the axis turned in azimuth, then in elevation); the render's pose is the unturned one."""
+    from scenes.view import project
+
+    sc = Scenario(camera="logitech-c270", range_m=4.0, yaw_deg=10.0, pan_deg=20.0, tilt_deg=8.0)
+    plain = Scenario(camera="logitech-c270", range_m=4.0, yaw_deg=10.0)
+    g = sc.geometry
+    cx, cy = g.principal_point_px
+    f = g.focal_length_px
+    uv = project(g, sc.camera_pose(), sc.marker_positions_world_m()[:1])[0]
+    p, t = math.radians(20.0), math.radians(8.0)
+    # direction to marker 1 in the turned camera: azimuth −p from the new axis' heading, elevation −t
+    d = np.array([-math.sin(p) * math.cos(0.0), 0.0, math.cos(p)])
+    d = np.array([d[0], d[2] * math.sin(t), d[2] * math.cos(t)])
+    assert uv == pytest.approx([cx + f * d[0] / d[2], cy + f * d[1] / d[2]], abs=1e-6)
+    np.testing.assert_allclose(sc.render_pose().rotation, plain.camera_pose().rotation)
+    assert "pan_deg" not in plain.to_dict() and sc.to_dict()["pan_deg"] == 20.0
+    assert Scenario.from_dict(sc.to_dict()) == sc
