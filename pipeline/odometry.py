@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["LOOSE_SAND", "WheelOdometry"]
+__all__ = ["LOOSE_SAND", "WheelOdometry", "scale_prior"]
 
 
 @dataclass(frozen=True)
@@ -78,11 +78,23 @@ class WheelOdometry:
         noise = rng.standard_normal((2, *d.shape))
         return d * (1 + self.bias) + self.scale_sd * root * noise[0], turns + self.heading_sd_rad * root * noise[1]
 
-    def step_covariance(self, step_m: float) -> NDArray[np.float64]:
+    def step_covariance(self, step_m: float, *, bias: bool = True) -> NDArray[np.float64]:
         """Covariance of one reported step (length m², heading rad²) as a filter assumes it: the noise
-        terms plus the bias, which a filter cannot know, taken as a zero-mean error of sd b·d."""
+        terms plus, with ``bias``, the bias, which a three-state filter cannot know, taken as a
+        zero-mean error of sd b·d (a filter with the scale as a state, :mod:`pipeline.ekf`, leaves it out)."""
         d = float(step_m)
-        return np.diag([self.scale_sd**2 * d + (self.bias * d) ** 2, self.heading_sd_rad**2 * d])
+        return np.diag([self.scale_sd**2 * d + (self.bias * d * bias) ** 2, self.heading_sd_rad**2 * d])
+
+
+def scale_prior(slip: tuple[float, float] = (0.05, 0.5)) -> tuple[float, float]:
+    """Mean and sd of the odometer's scale k = 1 − s (true length per reported length) for a slip s
+    uniform on ``slip`` (default :data:`LOOSE_SAND`'s): the prior of :mod:`pipeline.ekf`'s scale state.
+
+    >>> [round(v, 4) for v in scale_prior((0.05, 0.5))]
+    [0.725, 0.1299]
+    """
+    low, high = slip
+    return 1.0 - (low + high) / 2, (high - low) / math.sqrt(12.0)
 
 
 LOOSE_SAND = {

@@ -31,6 +31,7 @@ largest spacing that keeps the filter's error under the threshold, per seed and 
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -45,28 +46,51 @@ from camera_models.camera import load_camera
 from camera_models.optics import RadialMapping
 from pipeline.angles import Intrinsics
 from pipeline.crlb import planar_covariance, pose_covariance
-from pipeline.ekf import predict, update
-from pipeline.frames import pose_from_scenario
-from pipeline.odometry import LOOSE_SAND, WheelOdometry
+from pipeline.detect import detect
+from pipeline.ekf import mahalanobis2, predict, update
+from pipeline.frames import Pose, pose_from_scenario
+from pipeline.odometry import LOOSE_SAND, WheelOdometry, scale_prior
 from pipeline.ring import PlanarPose, fuse
 from scenes.beacon import beacon_design
 from scenes.render_cache import atomic_write_bytes
 from scenes.scenario import Scenario
 from scenes.view import camera_geometry
 from studies.engine import strict_json
+from studies.engine.frame import capture_frame, detect_options, render_batch_key
+from studies.engine.frame_task import FrameTask
 from studies.engine.report import Report
+from studies.engine.runner import Progress, no_progress, run_tasks
 
 __all__ = [
     "CENTROID_SD_PX",
+    "ERROR_BANDS_M",
+    "GATE_CHI2",
     "NAME",
     "DetectionTable",
+    "RenderedDetections",
+    "Sighting",
     "Traverse",
+    "error_covariances",
+    "frame_task",
     "largest_spacing",
+    "planar_in_target",
     "run",
+    "sightings",
     "simulate",
+    "traverse_frame",
 ]
 
 NAME = "traverse"
+FRAME_VERSION = 1
+"""Version of :func:`traverse_frame`'s rows (part of every stored frame's key)."""
+GATE_CHI2 = 16.27
+"""A detection whose robot pose lies farther from the filter's prediction than this squared
+Mahalanobis distance (χ² with 3 degrees of freedom, 0.999 quantile) is rejected as an outlier: a
+wrong side named, a misjudged range (1 in 1000 correct ones is rejected with it)."""
+RENDER_RANGE_FACTOR = 1.5
+"""Rendered traverses render no frame beyond this factor times the farthest range at which the
+detection table measured any correct pose (assumed: P(correct) falls from its last non-zero value to
+0 within a third of the range, as in every range-limit curve so far); those sightings count as missed."""
 CENTROID_SD_PX = 0.5
 """Noise of one marker centroid, px (assumed: a lit face a few pixels across in a compressed webcam
 frame is located to a fraction of a pixel; the CRLB scales with it)."""
@@ -109,6 +133,10 @@ class DetectionTable:
             curves.append((yaw, tuple(x for x, _ in at), tuple(p for _, p in at)))
         return cls(camera=camera, source=str(path), curves=tuple(curves))
 
+    def farthest_m(self) -> float:
+        """The farthest range at which any yaw's frames gave a correct pose, m (0 when none did)."""
+        return max((r for _, ranges, p in self.curves for r, q in zip(ranges, p, strict=True) if q > 0), default=0.0)
+
     def probability(self, range_m: float, yaw_deg: float) -> float:
         """P(correct) at a range (m) and |yaw| (°): linear in range between the ranges tried at each yaw
         (the nearest's value nearer than it; 0 beyond the farthest, where nothing was tried), then linear
@@ -148,6 +176,10 @@ class Traverse:
     first_beacon_m
         Distance along the tube of the first beacon (m; the robot starts at 0 beside a known one
         when 0).
+    led_current_mA
+        The beacons' LED drive, mA (the detection table's, and the rendered frames').
+    odometry
+        :class:`pipeline.odometry.WheelOdometry` fields to replace (the slip is drawn per run).
     """
 
     camera: str = "spedal-920"
@@ -160,6 +192,7 @@ class Traverse:
     wall_offset_m: float = 0.3
     wander_m: float = 0.3
     first_beacon_m: float = 0.0
+    led_current_mA: float = 2.0
     odometry: dict = field(default_factory=dict)
 
     def validate(self) -> None:
@@ -225,51 +258,223 @@ def _target_covariance(t: Traverse, ring: _Ring, range_m: float, yaw_deg: float)
     return flip @ cov @ flip
 
 
-def _detections(
-    t: Traverse, ring: _Ring, table: DetectionTable, robot: np.ndarray, beacons: np.ndarray, rng, cov_cache: dict
-) -> list[tuple[int, int, str, PlanarPose]]:
-    """(camera, beacon, side, robot pose estimate) of every detection at one true robot pose."""
+@dataclass(frozen=True)
+class Sighting:
+    """A beacon side in a ring camera's horizontal field at one step.
+
+    Attributes
+    ----------
+    camera, beacon, side
+        Ring camera index, beacon index along the tube, the side facing the camera.
+    u_m, v_m, psi_rad
+        The camera in that side's planar target frame: position (u along the side's outward normal,
+        v 90° counter-clockwise seen from above; m) and optical axis (counter-clockwise from u; rad).
+    bearing_rad
+        Direction to marker 1 from the camera's axis, counter-clockwise seen from above, rad.
+    """
+
+    camera: int
+    beacon: int
+    side: str
+    u_m: float
+    v_m: float
+    psi_rad: float
+    bearing_rad: float
+
+    @property
+    def range_m(self) -> float:
+        """Camera to marker 1 (in the plane), m."""
+        return float(math.hypot(self.u_m, self.v_m))
+
+    @property
+    def yaw_deg(self) -> float:
+        """The camera's angle off the side's normal, counter-clockwise seen from above, degrees."""
+        return math.degrees(math.atan2(self.v_m, self.u_m))
+
+
+def sightings(t: Traverse, fov_rad: float, d_t_m: float, robot: np.ndarray, beacons: np.ndarray) -> list[Sighting]:
+    """Every beacon side in a ring camera's horizontal field (``fov_rad``, the lens's) at the robot's
+    true pose (x, y, heading): per camera and beacon the side whose outward normal is closest to the
+    direction to the camera, when the camera is in front of it."""
     out = []
     for k in range(t.cameras_n):
-        mount = 2 * math.pi * k / t.cameras_n
-        axis = robot[2] + mount
+        axis = robot[2] + 2 * math.pi * k / t.cameras_n
         cam = robot[:2] + t.radius_m * np.array([math.cos(axis), math.sin(axis)])
         for b, centre in enumerate(beacons):
-            # the side facing the camera: outward normal closest to the direction to the camera
             to_cam = math.atan2(*(cam - centre)[::-1])
             side = min(SIDE_ANGLES, key=lambda s: abs(math.remainder(to_cam - SIDE_ANGLES[s], 2 * math.pi)))
             alpha = SIDE_ANGLES[side]  # beacons face along the tube (heading 0)
-            origin = centre + ring.d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
+            origin = centre + d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
             rel = _rot(-alpha) @ (cam - origin)
-            range_m = float(np.hypot(*rel))
-            yaw_deg = math.degrees(math.atan2(rel[1], rel[0]))  # the camera's angle off the side's normal
             bearing = math.remainder(math.atan2(*(origin - cam)[::-1]) - axis, 2 * math.pi)
-            if rel[0] <= 0 or abs(bearing) > ring.fov_rad / 2:
+            if rel[0] <= 0 or abs(bearing) > fov_rad / 2:
                 continue
-            if rng.random() >= table.probability(range_m, yaw_deg):
-                continue
-            key = (round(range_m, 1), round(yaw_deg))
-            if key not in cov_cache:
-                cov_cache[key] = _target_covariance(t, ring, *key)
-            c = cov_cache[key]
-            # truth in the target frame: camera position (u, v) and its axis angle ψ (counter-clockwise from u)
             psi = math.remainder(axis - alpha, 2 * math.pi)
-            est = np.array([*rel, psi]) + rng.multivariate_normal(np.zeros(3), c)
-            heading = est[2] + alpha - mount
-            offset = t.radius_m * np.array([math.cos(mount), math.sin(mount)])
-            position = origin + _rot(alpha) @ est[:2] - _rot(heading) @ offset
-            d_rot = np.array([[-math.sin(heading), -math.cos(heading)], [math.cos(heading), -math.sin(heading)]])
-            jac = np.zeros((3, 3))
-            jac[:2, :2], jac[:2, 2], jac[2, 2] = _rot(alpha), -d_rot @ offset, 1.0
-            out.append((k, b, side, PlanarPose(*position, math.remainder(heading, 2 * math.pi), jac @ c @ jac.T)))
+            out.append(Sighting(k, b, side, float(rel[0]), float(rel[1]), psi, bearing))
     return out
 
 
+def _robot_pose(t: Traverse, beacons: np.ndarray, d_t_m: float, camera: int, beacon: int, side: str, est, cov):
+    """The robot's global planar pose from a camera's pose ``est`` (u, v, ψ) in ``side``'s target frame
+    of ``beacon``, through the beacon's known pose and the camera's mount, with ``cov`` propagated."""
+    mount = 2 * math.pi * camera / t.cameras_n
+    alpha = SIDE_ANGLES[side]
+    origin = beacons[beacon] + d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
+    heading = est[2] + alpha - mount
+    offset = t.radius_m * np.array([math.cos(mount), math.sin(mount)])
+    position = origin + _rot(alpha) @ np.asarray(est[:2]) - _rot(heading) @ offset
+    d_rot = np.array([[-math.sin(heading), -math.cos(heading)], [math.cos(heading), -math.sin(heading)]])
+    jac = np.zeros((3, 3))
+    jac[:2, :2], jac[:2, 2], jac[2, 2] = _rot(alpha), -d_rot @ offset, 1.0
+    return PlanarPose(*position, math.remainder(heading, 2 * math.pi), jac @ cov @ jac.T)
+
+
+class _TableDetections:
+    """Detections drawn from a :class:`DetectionTable`: each sighting detected with its measured
+    P(correct), its pose drawn around the truth with the CRLB."""
+
+    def __init__(self, t: Traverse, ring: _Ring, table: DetectionTable, covariances: dict):
+        self.t, self.ring, self.table, self.cov = t, ring, table, covariances
+
+    def __call__(self, step: int, seen: list[Sighting], rng) -> list[tuple[Sighting, str, np.ndarray, np.ndarray]]:
+        out = []
+        for s in seen:
+            if rng.random() >= self.table.probability(s.range_m, s.yaw_deg):
+                continue
+            key = (round(s.range_m, 1), round(s.yaw_deg))
+            if key not in self.cov:
+                self.cov[key] = _target_covariance(self.t, self.ring, *key)
+            est = np.array([s.u_m, s.v_m, s.psi_rad]) + rng.multivariate_normal(np.zeros(3), self.cov[key])
+            out.append((s, s.side, est, self.cov[key]))
+        return out
+
+
+def planar_in_target(pose: Pose) -> tuple[float, float, float]:
+    """A camera's pose in a side's target frame as the traverse's planar (u, v, ψ): the target frame's
+    x is u; its y and z (down) flip into v and the counter-clockwise angle (see :func:`_target_covariance`)."""
+    p = pose.camera_position_t_m()
+    axis = pose.cv_from_t.T @ np.array([0.0, 0.0, 1.0])
+    return float(p[0]), float(-p[1]), float(math.atan2(-axis[1], axis[0]))
+
+
+def frame_task(t: Traverse, s: Sighting, seed: int) -> dict:
+    """The whole-frame task of a sighting: the side at its range and yaw (the scenario's yaw is the
+    target frame's, the sighting's mirrored), the camera turned by the bearing (``pan_deg``), the
+    ring at marker 1's height (assumed: the study's ring and beacon heights are not given), the dark
+    tube, the traverse's LED drive; detected after rectification with the lens's own distortion
+    (an ideal calibration, keeping the whole field: ``alpha`` 1)."""
+    scenario = {
+        "beacon": t.beacon,
+        "side": s.side,
+        "range_m": round(s.range_m, 4),
+        "yaw_deg": round(-s.yaw_deg, 3),
+        "pan_deg": round(math.degrees(s.bearing_rad), 3),
+        "camera": t.camera,
+        "environment": "dark",
+        "led_current_mA": t.led_current_mA,
+    }
+    return FrameTask(scenario=scenario, seed=seed, full_frame=True, rectification={"alpha": 1.0}).to_dict()
+
+
+def traverse_frame(task: dict) -> list[dict]:
+    """One sighting's frame rendered, captured and detected (best tracker and estimator): the side
+    named, the camera's planar pose in that side's target frame (:func:`planar_in_target`; NaN without
+    a pose) and the true one."""
+    task = FrameTask.coerce(task)
+    frame = capture_frame(task)
+    det = detect(
+        frame.image_bgr,
+        Intrinsics.from_geometry(frame.camera.geometry),
+        beacon=frame.scenario.beacon,
+        **detect_options(task, frame.camera),
+    )
+    true_u, true_v, true_psi = planar_in_target(pose_from_scenario(frame.scenario))
+    u, v, psi = planar_in_target(det.pose) if det.pose is not None and det.side else (math.nan,) * 3
+    return [
+        {
+            "side_detected": det.side or "",
+            "failure": "" if det.failure is None else str(det.failure),
+            "u_m": u,
+            "v_m": v,
+            "psi_rad": psi,
+            "true_u_m": true_u,
+            "true_v_m": true_v,
+            "true_psi_rad": true_psi,
+        }
+    ]
+
+
+ERROR_BANDS_M = (0.0, 1.0, 2.0, 4.0, 8.0, math.inf)
+"""Range bands (m) of the rendered detections' measured error covariance (:func:`error_covariances`)."""
+
+
+def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) -> list[dict]:
+    """The best estimator's error covariance (u, v, ψ in the target frame) per range band of
+    :data:`ERROR_BANDS_M`, measured on rendered frames (task, row) whose detector named the rendered
+    side: what a robot's designer gets by characterising the estimator against known poses, used as
+    the measurement covariance of the filter. The CRLB is not: the rendered estimates' errors are
+    20-80× its thinnest axis (blob-shape and rectification biases, not centroid noise). A band with
+    fewer than ``min_frames`` takes the covariance of all bands together; with fewer in all, the
+    errors' mean square with a floor of 1 cm and 0.5° (assumed)."""
+    errors, ranges = [], []
+    for task, row in pairs:
+        if row["side_detected"] == task["scenario"]["side"] and math.isfinite(row["u_m"]):
+            e = [row["u_m"] - row["true_u_m"], row["v_m"] - row["true_v_m"]]
+            errors.append([*e, math.remainder(row["psi_rad"] - row["true_psi_rad"], 2 * math.pi)])
+            ranges.append(math.hypot(row["true_u_m"], row["true_v_m"]))
+    errors_a, ranges_a = np.asarray(errors).reshape(-1, 3), np.asarray(ranges)
+    floor = np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2])
+
+    def covariance(e: np.ndarray) -> np.ndarray:
+        second = e.T @ e / len(e)  # about zero: a bias is an error too
+        return second + 1e-9 * np.eye(3) if len(e) >= min_frames else np.maximum(second, floor) * np.eye(3)
+
+    everything = covariance(errors_a) if len(errors_a) else floor
+    out = []
+    for low, high in itertools.pairwise(ERROR_BANDS_M):
+        inside = errors_a[(ranges_a >= low) & (ranges_a < high)]
+        cov = covariance(inside) if len(inside) >= min_frames else everything
+        out.append({"low_m": low, "high_m": high, "frames": len(inside), "covariance": cov.tolist()})
+    return out
+
+
+class RenderedDetections:
+    """Detections from rendered frames (:func:`traverse_frame` rows by task): a sighting is detected
+    when its frame gave a pose, on the side the detector named (a wrong side is an outlier the filter
+    must gate); its covariance the estimator's measured one at the estimated range
+    (:func:`error_covariances`). Sightings beyond ``max_range_m`` were not rendered: missed."""
+
+    def __init__(self, t: Traverse, rows: dict[str, dict], seed: int, max_range_m: float, bands: list[dict]):
+        self.t, self.rows, self.seed, self.max_range_m, self.bands = t, rows, seed, max_range_m, bands
+
+    def __call__(self, step: int, seen: list[Sighting], rng) -> list[tuple[Sighting, str, np.ndarray, np.ndarray]]:
+        out = []
+        for s in seen:
+            if s.range_m > self.max_range_m:
+                continue
+            row = self.rows[json.dumps(frame_task(self.t, s, self.seed), sort_keys=True)]
+            if not row["side_detected"] or not math.isfinite(row["u_m"]):
+                continue
+            est = np.array([row["u_m"], row["v_m"], row["psi_rad"]])
+            r = float(math.hypot(est[0], est[1]))
+            band = next(b for b in self.bands if b["low_m"] <= r < b["high_m"])
+            out.append((s, row["side_detected"], est, np.asarray(band["covariance"])))
+        return out
+
+
 def simulate(
-    t: Traverse, table: DetectionTable, spacing_m: float, seed: int, *, covariances: dict | None = None
+    t: Traverse,
+    table: DetectionTable,
+    spacing_m: float,
+    seed: int,
+    *,
+    covariances: dict | None = None,
+    detections: Callable | None = None,
 ) -> pd.DataFrame:
     """One traverse at one beacon spacing (m): a row per step (module docstring). ``covariances``:
-    the CRLB per (range, yaw) already computed for ``t`` (shared by the runs of one traverse)."""
+    the CRLB per (range, yaw) already computed for ``t`` (shared by the runs of one traverse);
+    ``detections``: where the detections come from (default drawn from ``table``; a
+    :class:`RenderedDetections` for rendered frames)."""
     ground = np.random.default_rng(seed)  # the robot's slip and odometry noise: the same at every spacing
     rng = np.random.default_rng([seed, round(spacing_m * 1000)])  # what the cameras see
     slip_low, slip_high = LOOSE_SAND["slip"]
@@ -277,19 +482,31 @@ def simulate(
     truth = _truth(t)
     beacons = _beacons(t, spacing_m)
     ring = _ring(t)
+    cache: dict = {} if covariances is None else covariances
+    detect_at = detections or _TableDetections(t, ring, table, cache)
     steps = np.hypot(*np.diff(truth[:, :2], axis=0).T)
     turns = np.array([math.remainder(a, 2 * math.pi) for a in np.diff(truth[:, 2])])
     d_hat, turn_hat = odo.report(steps, turns, seed=int(ground.integers(2**32)))
-    x_odo, x_ekf = truth[0].copy(), truth[0].copy()  # both start at the known start pose
-    p_ekf = np.diag([1e-4, 1e-4, 1e-6])
-    cache: dict = {} if covariances is None else covariances
+    x_odo = truth[0].copy()  # both start at the known start pose; the filter learns the odometer's scale
+    k_mean, k_sd = scale_prior(LOOSE_SAND["slip"])
+    x_ekf, p_ekf = np.array([*truth[0], k_mean]), np.diag([1e-4, 1e-4, 1e-6, k_sd**2])
     rows = []
     for i in range(len(truth)):
         if i:
             x_odo, _ = predict(x_odo, np.zeros((3, 3)), d_hat[i - 1], turn_hat[i - 1], np.zeros((2, 2)))
-            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], odo.step_covariance(d_hat[i - 1]))
-        seen = _detections(t, ring, table, truth[i], beacons, rng, cache)
-        fix = fuse([d[3] for d in seen]) if seen else None
+            q = odo.step_covariance(d_hat[i - 1], bias=False)  # the bias is the filter's scale state
+            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q)
+        found = detect_at(i, sightings(t, ring.fov_rad, ring.d_t_m, truth[i], beacons), rng)
+        poses = [
+            (s, side, _robot_pose(t, beacons, ring.d_t_m, s.camera, s.beacon, side, est, c))
+            for s, side, est, c in found
+        ]
+        kept = [
+            (s, side, pose)
+            for s, side, pose in poses
+            if mahalanobis2(x_ekf, p_ekf, pose.vector, pose.covariance) <= GATE_CHI2
+        ]
+        fix = fuse([pose for _, _, pose in kept]) if kept else None
         if fix is not None:
             x_ekf, p_ekf = update(x_ekf, p_ekf, fix.vector, fix.covariance)
         rows.append(
@@ -305,10 +522,13 @@ def simulate(
                 "filter_x_m": x_ekf[0],
                 "filter_y_m": x_ekf[1],
                 "filter_sd_m": float(math.sqrt(max(p_ekf[0, 0] + p_ekf[1, 1], 0.0))),
+                "filter_scale": float(x_ekf[3]),
                 "fix_x_m": fix.x_m if fix else math.nan,
                 "fix_y_m": fix.y_m if fix else math.nan,
-                "detections": len(seen),
-                "seen": ";".join(f"cam{k}:b{b}:{s}" for k, b, s, _ in seen),
+                "detections": len(kept),
+                "gated": len(poses) - len(kept),
+                "wrong_side": sum(side != s.side for s, side, _ in poses),
+                "seen": ";".join(f"cam{s.camera}:b{s.beacon}:{side}" for s, side, _ in kept),
                 "odometry_error_m": float(np.hypot(*(x_odo[:2] - truth[i, :2]))),
                 "filter_error_m": float(np.hypot(*(x_ekf[:2] - truth[i, :2]))),
                 "fix_error_m": float(np.hypot(fix.x_m - truth[i, 0], fix.y_m - truth[i, 1])) if fix else math.nan,
@@ -363,17 +583,49 @@ def run(
     seeds: int,
     threshold_m: float,
     table: DetectionTable,
-    progress: Callable[[], None] | None = None,
+    progress: Progress = no_progress,
+    rendered: bool = False,
+    workers: int | None = None,
 ) -> dict:
-    """Every spacing × seed (module docstring); returns the summary."""
+    """Every spacing × seed (module docstring); returns the summary. ``rendered``: the detections
+    from a rendered whole frame per sighting (:func:`traverse_frame`, stored in ``out/tasks`` so a
+    stopped run resumes; ``workers`` processes) instead of drawn from ``table``, which then only bounds
+    the ranges rendered (:data:`RENDER_RANGE_FACTOR`). ``progress``: the display of the frames, then of
+    the runs."""
     t0 = time.perf_counter()
     out = Path(out)
     frames, covariances = [], {}  # the CRLB at a range and yaw is the same in every run
-    for spacing in spacings_m:
-        for seed in range(seeds):
-            frames.append(simulate(t, table, float(spacing), seed, covariances=covariances))
-            if progress:
-                progress()
+    max_range_m = RENDER_RANGE_FACTOR * table.farthest_m()
+    rows: dict[str, dict] = {}
+    bands: list[dict] = []
+    if rendered:
+        ring = _ring(t)
+        tasks = {}
+        for spacing in spacings_m:
+            beacons = _beacons(t, float(spacing))
+            for pose in _truth(t):
+                for s in sightings(t, ring.fov_rad, ring.d_t_m, pose, beacons):
+                    if s.range_m <= max_range_m:
+                        for seed in range(seeds):
+                            task = frame_task(t, s, seed)
+                            tasks.setdefault(json.dumps(task, sort_keys=True), task)
+        done = run_tasks(
+            list(tasks.values()),
+            out,
+            traverse_frame,
+            workers=workers,
+            description="traverse frames",
+            progress=progress,
+            batch_key=render_batch_key,
+        )
+        rows = dict(zip(tasks, done, strict=True))
+        bands = error_covariances(list(zip(tasks.values(), done, strict=True)))
+    with progress("traverse runs", len(spacings_m) * seeds, 0) as advance:
+        for spacing in spacings_m:
+            for seed in range(seeds):
+                source = RenderedDetections(t, rows, seed, max_range_m, bands) if rendered else None
+                frames.append(simulate(t, table, float(spacing), seed, covariances=covariances, detections=source))
+                advance()
     steps = pd.concat(frames, ignore_index=True)
     per_run = (
         steps.groupby(["spacing_m", "seed"])
@@ -384,6 +636,8 @@ def run(
             odometry_max_error_m=("odometry_error_m", "max"),
             odometry_final_error_m=("odometry_error_m", "last"),
             slip=("slip", "first"),
+            gated=("gated", "sum"),
+            wrong_side=("wrong_side", "sum"),
         )
         .reset_index()
     )
@@ -391,7 +645,19 @@ def run(
     summary = {
         "study": NAME,
         "traverse": asdict(t),
-        "detections": {"camera": table.camera, "source": table.source, "centroid_sd_px": CENTROID_SD_PX},
+        "detections": {
+            "camera": table.camera,
+            "source": table.source,
+            "rendered": rendered,
+            "frames": len(rows),
+            "max_range_m": max_range_m if rendered else None,
+            "error_bands": [
+                {**{k: b[k] for k in ("low_m", "high_m", "frames")}, "sd": np.sqrt(np.diag(b["covariance"])).tolist()}
+                for b in bands
+            ],
+            "centroid_sd_px": CENTROID_SD_PX,
+            "gate_chi2": GATE_CHI2,
+        },
         "runs": per_run.to_dict("records"),
         "spacing": answer,
         "spacing_answer": spacing_text(answer),

@@ -36,8 +36,23 @@ def traverse(
             show_default="results/full/range-limit.summary.json",
         ),
     ] = None,
-    quick: Annotated[bool, typer.Option("--quick", help="20 m, spacings 5 and 10 m, two seeds.")] = False,
+    rendered: Annotated[
+        bool,
+        typer.Option(
+            "--rendered",
+            help="Render a whole frame for every beacon side a camera sees (up to 1.5x the detection table's "
+            "farthest correct range) and detect in it, instead of drawing detections from the table.",
+        ),
+    ] = False,
+    step_m: Annotated[float, typer.Option("--step-m", help="Odometry step, m.")] = 0.25,
+    quick: Annotated[
+        bool,
+        typer.Option(
+            "--quick", help="20 m, spacings 5 and 10 m, two seeds; with --rendered: 10 m in 0.5 m steps, one seed."
+        ),
+    ] = False,
     beacon: opt.Beacon = "v2",
+    workers: opt.Workers = None,
 ) -> None:
     """Drive a ring of cameras through a lava tube with beacons every D m: per step the detections, their
     fused pose and wheel odometry corrected by it (EKF); the largest spacing that keeps the error under
@@ -46,14 +61,17 @@ def traverse(
 
     spacings = parse_list("spacing-m", spacing_m, float)
     if quick:
-        spacings, path_m, seeds = (5.0, 10.0), 20.0, 2
+        spacings, path_m, seeds = ((5.0, 10.0), 10.0, 1) if rendered else ((5.0, 10.0), 20.0, 2)
+        step_m = 0.5 if rendered else step_m
     if not spacings or not all(s > 0 for s in spacings):
         raise UsageError(f"spacing-m: expected spacings > 0 m, got {spacing_m}")
     if seeds < 1:
         raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
     if not threshold_m > 0:
         raise UsageError(f"threshold-m: expected an error > 0 m, got {threshold_m:g}")
-    settings = tr.Traverse(camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m)
+    settings = tr.Traverse(
+        camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m, step_m=step_m
+    )
     source = detections or tr.DEFAULT_TABLE
     try:
         settings.validate()
@@ -63,10 +81,17 @@ def traverse(
     except ValueError as exc:
         raise UsageError(str(exc).splitlines()[0]) from None
     prepare_out_dir(out)
-    with rich_progress("traverse", len(spacings) * seeds, 0) as advance:
-        summary = tr.run(
-            out, settings, spacings_m=spacings, seeds=seeds, threshold_m=threshold_m, table=table, progress=advance
-        )
+    summary = tr.run(
+        out,
+        settings,
+        spacings_m=spacings,
+        seeds=seeds,
+        threshold_m=threshold_m,
+        table=table,
+        progress=rich_progress,
+        rendered=rendered,
+        workers=workers,
+    )
     console.print(f"traverse: {summary['spacing_answer']}; {summary['wall_s']:.0f} s; wrote {out}/report.html")
 
 

@@ -195,7 +195,7 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
         **{f"marker{i + 1}_{k}": v for i, c in enumerate(colours) for k, v in c.items()},
     }
     intrinsics = Intrinsics.from_geometry(camera.geometry)
-    detect_options = _detect_options(task, camera)
+    options = detect_options(task, camera)
     rows = []
     radii = [m["core_radius_px"] for m in saturation]
     processed: dict = {}  # the study's tracker's processed image, per resize: its threshold variants share it
@@ -213,7 +213,7 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
                 crop_origin_px=(cap.x0, cap.y0),
                 thesis_settings=settings,
                 track_cache=tracked,
-                **detect_options,
+                **options,
             )
             rows.append(
                 {
@@ -270,7 +270,7 @@ def _mask_measures(tracker: str, image_bgr, intrinsics, uv, radii, side: str, se
     }
 
 
-def _detect_options(task: FrameTask, camera: Camera) -> dict:
+def detect_options(task: FrameTask, camera: Camera) -> dict:
     """Detector options a task asks for: the study's weight experiment (``quest_weights``:
     ``tuned`` or ``equal``) and rectification (``rectification``: ``{"alpha": 0 or 1}``, with
     the lens's own distortion in OpenCV's model as the calibration: an ideal calibration)."""

@@ -11,7 +11,7 @@ from pipeline.detect import detect
 from pipeline.thesis_pose import EQUAL_WEIGHTS, STUDY_WEIGHTS
 from scenes.scenario import Scenario
 from scenes.view import camera_geometry, project
-from studies.engine.frame import _detect_options, noise_seed
+from studies.engine.frame import detect_options, noise_seed
 from studies.engine.frame_task import FrameTask
 from tests.helpers.synthetic import draw_markers
 
@@ -20,7 +20,7 @@ def test_task_options_become_detector_options():
     camera = load_camera("canon-t6-18mm")
 
     def options(**fields):
-        return _detect_options(FrameTask(scenario={}, seed=0, **fields), camera)
+        return detect_options(FrameTask(scenario={}, seed=0, **fields), camera)
 
     assert options() == {}
     assert options(quest_weights="equal")["quest_weights"] == EQUAL_WEIGHTS
