@@ -36,9 +36,16 @@ __all__ = ["mahalanobis2", "predict", "update"]
 
 
 def predict(
-    x: NDArray[np.float64], p: NDArray[np.float64], step_m: float, turn_rad: float, q: NDArray[np.float64]
+    x: NDArray[np.float64],
+    p: NDArray[np.float64],
+    step_m: float,
+    turn_rad: float,
+    q: NDArray[np.float64],
+    *,
+    scale_walk: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The state and covariance after one reported step (module docstring)."""
+    """The state and covariance after one reported step (module docstring); ``scale_walk``: the
+    four-state filter's scale drifts as a random walk of this variance per reported metre (1/m)."""
     n = len(x)
     k = float(x[3]) if n == 4 else 1.0
     heading = x[2] + turn_rad / 2
@@ -52,6 +59,8 @@ def predict(
     if n == 4:
         f[0, 3], f[1, 3] = step_m * c, step_m * s
     cov = f @ p @ f.T + g @ np.asarray(q, dtype=float) @ g.T
+    if n == 4:
+        cov[3, 3] += scale_walk * abs(step_m)
     return new, (cov + cov.T) / 2
 
 

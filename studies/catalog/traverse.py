@@ -4,29 +4,42 @@ A robot drives a straight lava tube (width ``tube_width_m``) along its centrelin
 sideways; beacons stand by the left wall every D metres (each with its four sides facing along
 and across the tube). At every step of ``step_m`` its ring of cameras
 (:class:`pipeline.ring`'s geometry: N cameras on a circle of radius r, facing outward) looks for
-them; every camera that has a beacon side in its horizontal field gives a detection with the
-probability the camera's **rendered range-limit frames** measured at that range and yaw
-(:class:`DetectionTable`: the fraction of correct poses of a range-limit summary's outcomes,
-interpolated between the ranges and yaws tried, 0 beyond them), and a pose: the camera's planar pose in
-that side's target frame drawn around the truth with the Cramér–Rao covariance of the marker
-centroids (:func:`pipeline.crlb.planar_covariance`, centroid noise :data:`CENTROID_SD_PX`), turned
-into the robot's global pose through the beacon's known pose and the camera's mount, with its
-covariance propagated. The detections of one instant are fused (:func:`pipeline.ring.fuse`) and
-correct the wheel odometry (:class:`pipeline.odometry.WheelOdometry`, slip drawn per run from
-:data:`pipeline.odometry.LOOSE_SAND`) in a planar EKF (:mod:`pipeline.ekf`).
+them: every camera with a beacon side in its horizontal field (:func:`sightings`) gives a detection,
+from one of two sources:
 
-What this is not (yet): frames rendered at every step of the path (general-pose scenes with
-several beacons and the tube's walls); here each detection's probability is the range-limit study's
-at the same range and yaw, its pose error the CRLB's, and the tube does not occlude (it is straight).
-Every side is taken to behave as the red side the range-limit table ran; a detection that named the
-wrong side or misjudged the range (an outlier a filter would have to gate) is not modelled: each
-detection here is a correct one.
+* **drawn** (default): with the probability the camera's **rendered range-limit frames** measured at
+  that range and yaw (:class:`DetectionTable`: the fraction of correct poses of a range-limit
+  summary's outcomes, interpolated between the ranges and yaws tried, 0 beyond them), its pose drawn
+  around the truth with the Cramér–Rao covariance of the marker centroids
+  (:func:`pipeline.crlb.planar_covariance`, centroid noise :data:`CENTROID_SD_PX`). Every detection is
+  a correct one, every side behaves as the red side the range-limit table ran.
+* **rendered** (``rendered=True``, ``--rendered``): a whole frame per sighting (:func:`frame_task`,
+  :func:`traverse_frame`): the side at its range and yaw, the camera turned by the bearing
+  (``Scenario.pan_deg``, so the lens's distortion and vignetting act where the beacon really falls),
+  the dark tube, the best tracker and estimator after the lens's rectification; the side the detector
+  names and the pose it estimates are what the robot gets, wrong ones included; the measurement
+  covariance is the estimator's error measured on those frames per range band
+  (:func:`error_covariances`). Frames are stored in ``out/tasks`` (a stopped run resumes) and shared
+  by the spacings and runs that see the same thing.
+
+Each detection's pose in the side's target frame is turned into the robot's global pose through the
+beacon's known pose and the camera's mount, with its covariance propagated; detections farther than
+χ²₃ = :data:`GATE_CHI2` from the filter's prediction are gated out, the rest of one instant fused
+(:func:`pipeline.ring.fuse`) and used to correct **wheel odometry** (:class:`pipeline.odometry.WheelOdometry`,
+slip drawn per run from :data:`pipeline.odometry.LOOSE_SAND`, constant along the run) in a planar EKF
+(:mod:`pipeline.ekf`) that carries the odometer's scale as a state (prior from the slip range, a
+random walk :data:`SCALE_WALK_PER_M`).
+
+What this is not (yet): several beacons in one rendered frame, the tube's own walls (the frames use
+the dark environment's basalt box), dust, a bend that hides beacons, slip that changes along the
+run; the beacon is associated with the right one by the robot (its identity is not detected).
 
 Outputs in ``out``: ``steps.parquet`` (one row per spacing × seed × step: truth, odometry, fix and
-filter poses, their errors, the detections), ``summary.json`` (per spacing and seed: fraction of
-steps with a fix, largest and final position error of the filter and of odometry alone; the
-largest spacing that keeps the filter's error under the threshold, per seed and over the seeds),
-``report.html`` (the path from above, the error along it, the table).
+filter poses, their errors, the detections, gated ones and ones that named another side),
+``summary.json`` (per spacing and seed: fraction of steps with a fix, largest and final position
+error of the filter and of odometry alone; the largest spacing that keeps the filter's error under
+the threshold, per seed and over the seeds; for rendered runs the frames and the error bands),
+``report.html`` (the path from above, the error along it, the tables).
 """
 
 from __future__ import annotations
@@ -91,6 +104,10 @@ RENDER_RANGE_FACTOR = 1.5
 """Rendered traverses render no frame beyond this factor times the farthest range at which the
 detection table measured any correct pose (assumed: P(correct) falls from its last non-zero value to
 0 within a third of the range, as in every range-limit curve so far); those sightings count as missed."""
+SCALE_WALK_PER_M = 0.02**2
+"""Variance per metre of the filter's odometer-scale random walk, 1/m (assumed: the slip may change
+by ~2 % per √m as the sand changes; the odometry model keeps it constant along a run, so this only
+keeps the filter from trusting its learnt scale for ever)."""
 CENTROID_SD_PX = 0.5
 """Noise of one marker centroid, px (assumed: a lit face a few pixels across in a compressed webcam
 frame is located to a fraction of a pixel; the CRLB scales with it)."""
@@ -495,7 +512,7 @@ def simulate(
         if i:
             x_odo, _ = predict(x_odo, np.zeros((3, 3)), d_hat[i - 1], turn_hat[i - 1], np.zeros((2, 2)))
             q = odo.step_covariance(d_hat[i - 1], bias=False)  # the bias is the filter's scale state
-            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q)
+            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q, scale_walk=SCALE_WALK_PER_M)
         found = detect_at(i, sightings(t, ring.fov_rad, ring.d_t_m, truth[i], beacons), rng)
         poses = [
             (s, side, _robot_pose(t, beacons, ring.d_t_m, s.camera, s.beacon, side, est, c))
@@ -570,7 +587,7 @@ def spacing_text(answer: dict) -> str:
     top = f"≥ {answer['high_m']:g}" if answer["at_least"] else f"{answer['high_m']:g}"
     seeds, under = len(answer["per_seed"]), f"error under {answer['threshold_m']:g} m"
     if answer["low_m"] == answer["high_m"]:
-        return f"{top} m at each of {seeds} seeds ({under})"
+        return f"{top} m at {'its one seed' if seeds == 1 else f'each of {seeds} seeds'} ({under})"
     low = "none" if answer["low_m"] is None else f"{answer['low_m']:g}"
     return f"{low} to {top} m over {seeds} seeds ({under})"
 
@@ -671,6 +688,23 @@ def run(
     return summary
 
 
+def _source_text(detections: dict) -> str:
+    """Where the report's detections came from, in words."""
+    if detections["rendered"]:
+        return (
+            f"Detections from {detections['frames']} rendered whole frames: every beacon side a ring camera "
+            f"had in its field within {detections['max_range_m']:g} m (1.5× the farthest correct pose of "
+            f"{detections['source']}; farther ones count as missed), the camera turned by the bearing, the dark "
+            "tube, detected by the best tracker and estimator after the lens's rectification; one beacon per "
+            "frame (another beacon in the same view, ≥ a spacing farther, is not in it)."
+        )
+    return (
+        f"Detections from {detections['source']} (the camera's rendered range-limit frames: P(correct) as "
+        "measured at the ranges and yaws tried, interpolated, 0 beyond them); pose noise the Cramér–Rao bound "
+        f"at {detections['centroid_sd_px']:g} px per centroid. Not rendered per step (run with --rendered)."
+    )
+
+
 def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, summary: dict) -> None:
     import matplotlib
 
@@ -682,16 +716,40 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
         [
             f"Largest beacon spacing that keeps the position error under {summary['spacing']['threshold_m']:g} m: "
             f"{summary['spacing_answer']}.",
-            f"Detections from {summary['detections']['source']} (the camera's rendered range-limit frames: "
-            "P(correct) as measured at the ranges and yaws tried, interpolated, 0 beyond them); pose "
-            f"noise the Cramér–Rao bound at {CENTROID_SD_PX:g} px per centroid; wheel odometry on loose sand with "
-            "the slip drawn per run. Not rendered per step: see the module docstring of studies/catalog/traverse.py.",
+            _source_text(summary["detections"]),
+            "Wheel odometry on loose sand with the slip drawn per run and constant along it; the filter (EKF) "
+            "learns the odometer's scale from the fixes (a state, with a random walk) and gates every detection "
+            f"whose pose lies beyond χ²₃ = {GATE_CHI2:g} of its prediction.",
         ]
     )
+    bands = summary["detections"].get("error_bands") or []
+    if bands:
+        rep.table(
+            pd.DataFrame(
+                [
+                    {
+                        "range band, m": (
+                            f"{b['low_m']:g}-{b['high_m']:g}"
+                            if math.isfinite(b["high_m"] or math.inf)
+                            else f"≥ {b['low_m']:g}"
+                        ),
+                        "frames": b["frames"],
+                        "sd u, mm": 1e3 * b["sd"][0],
+                        "sd v, mm": 1e3 * b["sd"][1],
+                        "sd heading, °": math.degrees(b["sd"][2]),
+                    }
+                    for b in bands
+                ]
+            ),
+            "The best estimator's error measured on the rendered frames that named the rendered side (the filter's "
+            "measurement covariance; a band with under 10 frames takes all the bands' together)",
+            float_format="{:.3g}",
+        )
     rep.table(
         per_run,
         "Per spacing and seed: fraction of steps with a fix, the filter's and odometry's largest and final "
-        "position errors (m), the run's slip",
+        "position errors (m), the run's slip, detections the gate rejected and detections that named another "
+        "side than the one facing the camera (a neighbouring side seen obliquely can be a correct one)",
         float_format="{:.3g}",
     )
     seen = [item.split(":") for text in steps.seen for item in text.split(";") if item]

@@ -20,7 +20,7 @@ def traverse(
     cameras_n: Annotated[int, typer.Option("--cameras-n", help="Cameras on the ring (the study: 6).")] = 6,
     radius_m: Annotated[float, typer.Option("--radius-m", help="Ring radius, m (the study: 0.2).")] = 0.2,
     spacing_m: Annotated[str, typer.Option("--spacing-m", help="Beacon spacings to try, m, comma-separated.")] = (
-        "5,10,15,20"
+        "5,10,15,20,25,30,40"
     ),
     path_m: Annotated[float, typer.Option("--path-m", help="Length of the drive, m.")] = 50.0,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per spacing (slip, noise and detections).")] = 5,
