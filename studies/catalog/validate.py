@@ -33,7 +33,9 @@ the fixed-focus webcams); the report marks the study's headline conclusions agre
 
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 from pathlib import Path
 
 import numpy as np
@@ -221,8 +223,7 @@ def run(
 
     preliminary = tasks_for({"preliminary"}, None)
     rows = run_frames(preliminary, out, execution, description=f"{NAME} preliminary")
-    derived = derive_thresholds(preliminary)
-    atomic_write_bytes(out / "derived_thresholds.json", strict_json.dumps(derived, indent=1).encode())
+    derived = _derived_thresholds(out, preliminary)
     later = tasks_for({"range", "primary", "weights"}, {"study": None, "derived": derived})
     rows += run_frames(later, out, execution, description=f"{NAME} range, primary, weights")
     frame = write_tables(out, rows)
@@ -247,6 +248,20 @@ def run(
     summary = {"study": NAME, "calibrated_set": which, "conclusions": verdicts, "derived_thresholds": derived}
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return table.to_dict("records")
+
+
+def _derived_thresholds(out: Path, preliminary: list[dict]) -> dict:
+    """:func:`derive_thresholds` of the preliminary tasks, or, when a stopped run already derived them
+    from the same tasks (``derived_thresholds.key``: a digest of the tasks), the stored ones: deriving
+    re-captures every preliminary frame in this process (~30 min for 20 points)."""
+    key = hashlib.sha256(strict_json.dumps(preliminary).encode()).hexdigest()
+    path, key_path = out / "derived_thresholds.json", out / "derived_thresholds.key"
+    if path.is_file() and key_path.is_file() and key_path.read_text().strip() == key:
+        return json.loads(path.read_text())
+    derived = derive_thresholds(preliminary)
+    atomic_write_bytes(path, strict_json.dumps(derived, indent=1).encode())
+    atomic_write_bytes(key_path, key.encode())
+    return derived
 
 
 def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
