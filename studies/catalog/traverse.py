@@ -430,9 +430,12 @@ def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) 
     :data:`ERROR_BANDS_M`, measured on rendered frames (task, row) whose detector named the rendered
     side: what a robot's designer gets by characterising the estimator against known poses, used as
     the measurement covariance of the filter. The CRLB is not: the rendered estimates' errors are
-    20-80× its thinnest axis (blob-shape and rectification biases, not centroid noise). A band with
-    fewer than ``min_frames`` takes the covariance of all bands together; with fewer in all, the
-    errors' mean square with a floor of 1 cm and 0.5° (assumed)."""
+    20-80× its thinnest axis (blob-shape and rectification biases, not centroid noise). Gross errors
+    (a pose flipped or metres off on the right side) are trimmed as the filter's gate would reject them
+    (squared Mahalanobis distance beyond :data:`GATE_CHI2`, repeated until no frame changes side), so
+    the covariance is the inliers'; ``outliers`` counts them per band. A band with fewer than
+    ``min_frames`` takes the covariance of all bands together; with fewer in all, the errors' mean
+    square with a floor of 1 cm and 0.5° (assumed)."""
     errors, ranges = [], []
     for task, row in pairs:
         if row["side_detected"] == task["scenario"]["side"] and math.isfinite(row["u_m"]):
@@ -443,15 +446,35 @@ def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) 
     floor = np.diag([0.01**2, 0.01**2, math.radians(0.5) ** 2])
 
     def covariance(e: np.ndarray) -> np.ndarray:
-        second = e.T @ e / len(e)  # about zero: a bias is an error too
-        return second + 1e-9 * np.eye(3) if len(e) >= min_frames else np.maximum(second, floor) * np.eye(3)
+        if len(e) < min_frames:
+            return np.maximum(e.T @ e / max(len(e), 1), floor) * np.eye(3)
+        # the inliers' second moment about zero (a bias is an error too), gross errors trimmed; started from
+        # the median absolute errors (1.4826 MAD: a Gaussian's sd), so that many gross errors cannot mask themselves
+        second = np.diag((1.4826 * np.median(np.abs(e), axis=0)) ** 2 + 1e-9)
+        keep = np.zeros(len(e), dtype=bool)
+        for _ in range(50):
+            inside = np.einsum("ij,jk,ik->i", e, np.linalg.inv(second), e) <= GATE_CHI2
+            if np.array_equal(inside, keep) or inside.sum() < min_frames:
+                break
+            keep = inside
+            second = e[keep].T @ e[keep] / keep.sum() + 1e-9 * np.eye(3)
+        return second
 
     everything = covariance(errors_a) if len(errors_a) else floor
     out = []
     for low, high in itertools.pairwise(ERROR_BANDS_M):
         inside = errors_a[(ranges_a >= low) & (ranges_a < high)]
         cov = covariance(inside) if len(inside) >= min_frames else everything
-        out.append({"low_m": low, "high_m": high, "frames": len(inside), "covariance": cov.tolist()})
+        d2 = np.einsum("ij,jk,ik->i", inside, np.linalg.inv(cov), inside) if len(inside) else np.zeros(0)
+        out.append(
+            {
+                "low_m": low,
+                "high_m": high,
+                "frames": len(inside),
+                "outliers": int((d2 > GATE_CHI2).sum()),
+                "covariance": cov.tolist(),
+            }
+        )
     return out
 
 
@@ -669,7 +692,10 @@ def run(
             "frames": len(rows),
             "max_range_m": max_range_m if rendered else None,
             "error_bands": [
-                {**{k: b[k] for k in ("low_m", "high_m", "frames")}, "sd": np.sqrt(np.diag(b["covariance"])).tolist()}
+                {
+                    **{k: b[k] for k in ("low_m", "high_m", "frames", "outliers")},
+                    "sd": np.sqrt(np.diag(b["covariance"])).tolist(),
+                }
                 for b in bands
             ],
             "centroid_sd_px": CENTROID_SD_PX,
@@ -734,6 +760,7 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
                             else f"≥ {b['low_m']:g}"
                         ),
                         "frames": b["frames"],
+                        "gross errors": b.get("outliers", 0),
                         "sd u, mm": 1e3 * b["sd"][0],
                         "sd v, mm": 1e3 * b["sd"][1],
                         "sd heading, °": math.degrees(b["sd"][2]),
@@ -742,7 +769,8 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
                 ]
             ),
             "The best estimator's error measured on the rendered frames that named the rendered side (the filter's "
-            "measurement covariance; a band with under 10 frames takes all the bands' together)",
+            "measurement covariance: the inliers', gross errors trimmed as the gate would; a band with under 10 "
+            "frames takes all the bands' together)",
             float_format="{:.3g}",
         )
     rep.table(
