@@ -11,6 +11,13 @@ and side is the window's configuration with the largest margin in saturation, re
 with the radiant power (mW, datasheet model) of one LED and of the side's five LEDs at
 that current. Renders do not depend on the current (linearity), so the current sweep
 costs no renders.
+
+Frames go where the window is decided (:func:`studies.engine.sweep.sweep_screened`): a setting
+is in the window only if every one of its frames is correct at every range (P̂ ≥ 0.95 from 4
+frames is 4 of 4), so each setting first gets one frame per range, and the other seeds only
+where those were all correct. The window, its size and the recommendation are the full grid's;
+a setting ruled out shows the frames it got (often 0 of 1). At points of the unknowns every
+seed runs (their P(correct) feeds an interval).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from studies.engine import strict_json
 from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
 from studies.engine.scoring import detection_success
-from studies.engine.sweep import Execution, sweep
+from studies.engine.sweep import Execution, Screening, sweep_screened
 from studies.engine.tasks import StudyOptions, grid_conditions
 from studies.engine.uncertainty import nominal_rows, physics_interval, physics_note, point_rows
 
@@ -64,14 +71,32 @@ def default_options(quick: bool) -> StudyOptions:
 
 def run(out: Path, options: StudyOptions, execution: Execution = Execution()) -> dict:
     """Run the study into ``out``; returns the summary."""
-    frame = sweep(NAME, grid_conditions(options), options, out, execution=execution, estimators=["best"])
-    return write_outputs(out, options, frame)
+    frame, screening = sweep_screened(
+        NAME, grid_conditions(options), options, out, setting_of, estimators=["best"], execution=execution
+    )
+    return write_outputs(out, options, frame, screening)
 
 
-def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame) -> dict:
-    """summary.json and report.html of a finished sweep's results table; returns the summary."""
+SETTING = ("camera", "side", "led_current_mA", "foam", "paper_sheets", "paper_colour")
+"""What a setting is: the fields of :func:`configuration_table`'s key but range and tracker."""
+
+
+def setting_of(record: dict) -> tuple | None:
+    """The setting of a nominal condition or of its frames' rows (:data:`SETTING`); None at a
+    point of the unknowns (those run every seed)."""
+    if record.get("point") is not None:
+        return None
+    return tuple(record[k] for k in SETTING)
+
+
+def write_outputs(out: Path, options: StudyOptions, frame: pd.DataFrame, screening: Screening | None = None) -> dict:
+    """summary.json and report.html of a finished sweep's results table (``screening``: what a
+    screened sweep spent; None for a full grid); returns the summary."""
     table = configuration_table(nominal_rows(frame))
-    summary = {"study": NAME, "recommended": recommend(table), "configurations": table.to_dict("records")}
+    summary = {"study": NAME, "recommended": recommend(table)}
+    if screening is not None:
+        summary["screening"] = screening.to_dict()
+    summary["configurations"] = table.to_dict("records")
     at_points = point_rows(frame)
     if len(at_points):
         add_physics(summary["recommended"], {int(i): configuration_table(g) for i, g in at_points.groupby("point")})
@@ -226,11 +251,18 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
 
     rep = Report("LED brightness × diffusers: detection, colour and saturation")
     lines = [f"{r['camera']}, {r['side']} side: {recommendation_text(r)}." for r in summary["recommended"]]
-    frames = int(table.frames.min()) if len(table) else 0
+    spent = summary.get("screening")
     lines.append(
-        f"Evidence: {frames} frames per configuration and range. The window takes the observed fraction "
-        "(P ≥ 0.95) at face value; with so few frames its Wilson lower bound is far below 0.95, so it ranks "
-        "settings rather than proving them."
+        f"Evidence: {int(table.frames.min()) if len(table) else 0} frames per configuration and range."
+        if spent is None
+        else f"Evidence: {options.seeds} frames per range for each of the {spent['confirmed']} settings (of "
+        f"{spent['units']}) whose first frame was correct at every range, one per range for the rest (a failure "
+        f"already rules a setting out): {spent['frames']} frames of the full grid's {spent['grid_frames']}, the "
+        "same window."
+    )
+    lines.append(
+        "The window takes the observed fraction (P ≥ 0.95) at face value; with so few frames its Wilson lower "
+        "bound is far below 0.95, so it ranks settings rather than proving them."
     )
     rep.lead([*lines, *physics_note(summary)])
     rep.text(

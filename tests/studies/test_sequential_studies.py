@@ -159,3 +159,42 @@ def test_the_design_options_reach_the_study(monkeypatch, tmp_path):
     assert seen["design"] == range_limit.default_design(True).with_overrides(target_width_m=1.5)
     code, _, _ = invoke(["study", "range-limit", "--quick", "--out", str(tmp_path / "p")])
     assert code == 0 and seen["design"] is None  # no design option: the fixed grid
+
+
+def test_brightness_diffuser_screens_settings_by_their_first_frames_to_the_full_grids_window(monkeypatch, tmp_path):
+    """brightness-diffuser's screened sweep against the full grid on planted frames whose far
+    fall-off (r₅₀ from 5.5 to 9.7 m) puts many settings near P = 0.95 at 7 m: the same settings in
+    the window, the same recommendation per camera and side, every passing setting with all its
+    frames, and fewer frames in all (the planted change "a setting passes on any first success"
+    would admit settings with a failure)."""
+    from studies.catalog import brightness_diffuser as bd
+    from studies.engine import sweep
+    from studies.engine.tasks import StudyOptions, grid_conditions
+    from tests.helpers.planted_frames import planted_rows
+
+    def r50(task):
+        sc = task["scenario"]
+        return 5.5 + 0.3 * sc["led_current_mA"] + 0.6 * sc["paper_sheets"] + 0.4 * sc["foam"]
+
+    monkeypatch.setattr(sweep, "run_frames", planted_rows(r50, lambda t: (0.6, 0.3)))
+    options = StudyOptions(
+        cameras=("logitech-c270", "canon-t6-18mm"), sides=("red", "green"), ranges_m=(3.0, 7.0),
+        currents_mA=(1.0, 2.0, 5.0), diffusers=((False, 0, "white"), (True, 1, "white"), (True, 3, "matched")),
+        seeds=4,
+    )  # fmt: skip
+    full = bd.configuration_table(sweep.sweep("bd", grid_conditions(options), options, tmp_path / "full"))
+    frame, spent = sweep.sweep_screened("bd", grid_conditions(options), options, tmp_path / "s", bd.setting_of)
+    screened = bd.configuration_table(frame)
+
+    def window(table):
+        per = table.groupby(list(bd.SETTING)).in_window.all()
+        return set(per[per].index)
+
+    assert 0 < len(window(full)) < len(full) // 2  # the planted truth leaves settings on both sides
+    assert window(screened) == window(full)
+    assert bd.recommend(screened) == bd.recommend(full)
+    kept = screened[screened.set_index(list(bd.SETTING)).index.isin(window(full))]
+    assert (kept.frames == options.seeds).all()
+    assert spent.grid_frames == len(grid_conditions(options)) * options.seeds == len(full) * options.seeds
+    assert spent.frames == len(frame) < spent.grid_frames
+    assert spent.units == len(full) // 2 and len(window(full)) <= spent.confirmed < spent.units
