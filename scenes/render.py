@@ -171,6 +171,7 @@ def _scaled_component(scenario: Scenario, group: str, unit_image: np.ndarray, un
         exit_spectrum = led.spectral_shape * spectral_factor
         transmitted = spectra.integrate_nm(exit_spectrum)
         factor = led.radiant_intensity_W_sr(side_current_mA(scenario, side)) * transmitted
+        factor *= scenario.dust_transmittance  # the LEDs' light crosses the dust to the camera
         shape = exit_spectrum / transmitted if transmitted > 0 else led.spectral_shape
     unit_image = np.asarray(unit_image, dtype=np.float32)
     unit_image.setflags(write=False)
@@ -184,13 +185,13 @@ def with_led_current(radiance: SpectralRadiance, current_mA: float) -> SpectralR
 
 
 def with_emission(radiance: SpectralRadiance, scenario: Scenario) -> SpectralRadiance:
-    """The same render with the LEDs' light of ``scenario``: its drive and its LED intensity bins
-    (the :data:`scenes.data_overrides.GAIN` overrides). Exact, as light transport is linear: the
+    """The same render with the LEDs' light of ``scenario``: its drive, its LED intensity bins
+    (the :data:`scenes.data_overrides.GAIN` overrides) and the dust it crosses. Exact, as light transport is linear: the
     unit renders are rescaled in memory. ``scenario`` must differ from the render's only in those
     (``ValueError`` otherwise)."""
     rendered = Scenario.from_dict(radiance.scenario)
     if rendered.without_gains() != scenario.without_gains():
-        raise ValueError("scenario: differs from the render's in more than the LEDs' drive and intensity")
+        raise ValueError("scenario: differs from the render's in more than the LEDs' drive, intensity and dust")
     components = tuple(
         _scaled_component(scenario, c.name, c.unit_image, c.unit_key) if c.unit_image is not None else c
         for c in radiance.components

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scenes import dust
 from scenes.beacon import HOUSING_FINISHES, BeaconDesign, beacon_design, target_to_beacon
 from scenes.data_overrides import GAIN, check_data_overrides, data_path
 from scenes.diffusers import DiffuserConfig
@@ -184,6 +185,12 @@ class Scenario:
         sorted by path (a mapping is accepted): the LEDs' intensity bin, the foam, the paper,
         the lit face, the housing walls' leak (:data:`scenes.data_overrides.DATA_PATHS`); empty:
         the files' values.
+    dust_extinction_per_m
+        Extinction coefficient σ of airborne dust between camera and beacon, m⁻¹ (0: clear air):
+        the beacon's light reaches the camera attenuated by T = exp(−σ · range_m)
+        (:mod:`scenes.dust`; :attr:`dust_transmittance`); the light it scatters into the view is
+        not modelled. σ = 0.39 m⁻¹ is 10 m Koschmieder visibility. Only where nothing but the
+        LEDs lights the scene (the room's light would need the medium rendered).
     """
 
     beacon: str = "v2"
@@ -202,6 +209,7 @@ class Scenario:
     paper_colour: str = "white"
     render: RenderSettings = field(default_factory=RenderSettings)
     data: tuple[tuple[str, float], ...] = ()
+    dust_extinction_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         try:  # checked, and as the canonical sorted tuple of (path, value) (a mapping or JSON's lists in)
@@ -234,6 +242,16 @@ class Scenario:
             value = getattr(self, name)
             if not _finite(value) or abs(value) >= 90:
                 raise ScenarioError(f"{name}: expected an angle in (-90, 90) degrees, got {value!r}")
+        if not _finite(self.dust_extinction_per_m) or self.dust_extinction_per_m < 0:
+            raise ScenarioError(
+                "dust_extinction_per_m: expected an extinction coefficient >= 0 per m, "
+                f"got {self.dust_extinction_per_m!r}"
+            )
+        if self.dust_extinction_per_m > 0 and environment(self.environment).has_ambient:
+            raise ScenarioError(
+                f"dust_extinction_per_m: dust only in an environment without ambient light (dark), not "
+                f"{self.environment!r} (its room light would need the medium rendered)"
+            )
         if self.housing not in HOUSING_FINISHES:
             raise ScenarioError(f"housing: expected one of {', '.join(HOUSING_FINISHES)}, got {self.housing!r}")
         try:
@@ -308,7 +326,16 @@ class Scenario:
         """This scenario at the datasheet drive and without the overrides that only scale the LEDs'
         light (:data:`scenes.data_overrides.GAIN`): what a unit render depends on."""
         kept = tuple((p, v) for p, v in self.data if data_path(p)[0].acts != GAIN)
-        return dataclasses.replace(self, led_current_mA=None, data=kept)
+        return dataclasses.replace(self, led_current_mA=None, data=kept, dust_extinction_per_m=0.0)
+
+    @property
+    def dust_transmittance(self) -> float:
+        """Fraction of the beacon's light that crosses the dust to the camera, exp(−σ · range_m).
+
+        >>> round(Scenario(range_m=10.0, dust_extinction_per_m=0.3912).dust_transmittance, 4)
+        0.02
+        """
+        return dust.transmittance(self.dust_extinction_per_m, self.range_m)
 
     @property
     def geometry(self) -> CameraGeometry:
@@ -368,13 +395,13 @@ class Scenario:
     # -- identity ---------------------------------------------------------------------
     def to_dict(self) -> dict:
         """Plain-data form (JSON-able); ``data`` as a mapping, left out when empty, and ``pan_deg``,
-        ``tilt_deg`` left out at 0 (so scenarios without them keep the keys they had before they
-        existed)."""
+        ``tilt_deg`` and ``dust_extinction_per_m`` left out at 0 (so scenarios without them keep the
+        keys they had before they existed)."""
         out = dataclasses.asdict(self)
         out.pop("data")
         if self.data:
             out["data"] = dict(self.data)
-        for name in ("pan_deg", "tilt_deg"):  # left out at 0, so unturned scenarios keep their keys
+        for name in ("pan_deg", "tilt_deg", "dust_extinction_per_m"):  # left out at 0: keys kept
             if not out[name]:
                 out.pop(name)
         return out

@@ -1,8 +1,9 @@
 """``beacon-sim traverse``: how far apart the beacons may be, and how good the robot's position is.
 
-A robot drives a straight lava tube (width ``tube_width_m``) along its centreline, wandering
-sideways; beacons stand by the left wall every D metres (each with its four sides facing along
-and across the tube). At every step of ``step_m`` its ring of cameras
+A robot drives a lava tube (:class:`scenes.tube.Tube`: width ``tube_width_m``, straight or with one
+bend) along its centreline, wandering sideways; beacons stand by the left wall every D metres along
+it (each with its four sides facing along and across the tube where it stands). A bend's inner wall
+hides the beacons around it (a sight line must stay inside the tube). At every step of ``step_m`` its ring of cameras
 (:class:`pipeline.ring`'s geometry: N cameras on a circle of radius r, facing outward) looks for
 them: every camera with a beacon side in its horizontal field (:func:`sightings`) gives a detection,
 from one of two sources:
@@ -30,9 +31,13 @@ slip drawn per run from :data:`pipeline.odometry.LOOSE_SAND`, constant along the
 (:mod:`pipeline.ekf`) that carries the odometer's scale as a state (prior from the slip range, a
 random walk :data:`SCALE_WALK_PER_M`).
 
-What this is not (yet): several beacons in one rendered frame, the tube's own walls (the frames use
-the dark environment's basalt box), dust, a bend that hides beacons, slip that changes along the
-run; the beacon is associated with the right one by the robot (its identity is not detected).
+Dust (``dust_extinction_per_m``, rendered frames only) dims every beacon's light by Beer–Lambert over
+its range (:attr:`scenes.scenario.Scenario.dust_transmittance`; the light it scatters into the view
+is left out, so it costs at least that much).
+
+What this is not (yet): several beacons in one rendered frame, the tube's own walls in the frames
+(they use the dark environment's basalt box), slip that changes along the run; the beacon is
+associated with the right one by the robot (its identity is not detected).
 
 Outputs in ``out``: ``steps.parquet`` (one row per spacing × seed × step: truth, odometry, fix and
 filter poses, their errors, the detections, gated ones and ones that named another side),
@@ -65,8 +70,10 @@ from pipeline.frames import Pose, pose_from_scenario
 from pipeline.odometry import LOOSE_SAND, WheelOdometry, scale_prior
 from pipeline.ring import PlanarPose, fuse
 from scenes.beacon import beacon_design
+from scenes.dust import visual_range_m
 from scenes.render_cache import atomic_write_bytes
 from scenes.scenario import Scenario
+from scenes.tube import Tube
 from scenes.view import camera_geometry
 from studies.engine import strict_json
 from studies.engine.frame import capture_frame, detect_options, render_batch_key
@@ -188,6 +195,13 @@ class Traverse:
         Length of the drive (m) and of one odometry step (m).
     tube_width_m, wall_offset_m
         Tube width (m) and how far from the left wall the beacons stand (m).
+    bend_deg, bend_at_m, bend_radius_m
+        The tube's one bend (:class:`scenes.tube.Tube`): its turn (degrees, positive to the left; 0: a
+        straight tube), where along the tube it starts (m) and the centreline's radius there (m;
+        assumed 6 m: a tube a few metres wide turning within two or three widths).
+    dust_extinction_per_m
+        Airborne dust's extinction coefficient, m⁻¹ (0: clear air; rendered frames only; Koschmieder
+        visual range 3.912 / σ).
     wander_m
         Amplitude of the robot's sideways wander about the centreline (m), one period per 20 m.
     first_beacon_m
@@ -208,6 +222,10 @@ class Traverse:
     tube_width_m: float = 3.0
     wall_offset_m: float = 0.3
     wander_m: float = 0.3
+    bend_deg: float = 0.0
+    bend_at_m: float = 20.0
+    bend_radius_m: float = 6.0
+    dust_extinction_per_m: float = 0.0
     first_beacon_m: float = 0.0
     led_current_mA: float = 2.0
     odometry: dict = field(default_factory=dict)
@@ -223,26 +241,44 @@ class Traverse:
             raise ValueError(f"wall_offset_m: expected (0, {self.tube_width_m / 2:g}) m, got {self.wall_offset_m!r}")
         if not 0 <= self.wander_m < self.tube_width_m / 2 - self.wall_offset_m:
             raise ValueError(f"wander_m: expected a wander that keeps the robot off the beacons, got {self.wander_m!r}")
+        self.tube.validate()
+        if not (math.isfinite(self.dust_extinction_per_m) and self.dust_extinction_per_m >= 0):
+            raise ValueError(f"dust_extinction_per_m: expected >= 0 per m, got {self.dust_extinction_per_m!r}")
         beacon_design(self.beacon)
         camera_geometry(self.camera)
+
+    @property
+    def tube(self) -> Tube:
+        """The tube's floor plan."""
+        return Tube(self.tube_width_m, self.bend_deg, self.bend_at_m, self.bend_radius_m)
 
 
 def _rot(a: float) -> np.ndarray:
     return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
 
 
+def _along(t: Traverse) -> np.ndarray:
+    """Distance along the tube's centreline of every step (m)."""
+    return np.arange(0.0, t.path_m + 1e-9, t.step_m)
+
+
 def _truth(t: Traverse) -> np.ndarray:
-    """The true path: (n + 1) × 3 poses (x along the tube, y across, heading; m, m, rad)."""
-    x = np.arange(0.0, t.path_m + 1e-9, t.step_m)
-    y = t.wander_m * np.sin(2 * math.pi * x / 20.0)
-    heading = np.arctan2(np.gradient(y, x), 1.0) if len(x) > 1 else np.zeros(1)
-    return np.column_stack([x, y, heading])
+    """The true path: (n + 1) × 3 poses (x, y, heading; m, m, rad; x along the tube where it starts,
+    y to the left), wandering about the centreline."""
+    s = _along(t)
+    xy, _ = t.tube.at(s, t.wander_m * np.sin(2 * math.pi * s / 20.0))
+    if len(s) < 2:
+        return np.column_stack([xy, np.zeros(1)])
+    heading = np.arctan2(np.gradient(xy[:, 1], s), np.gradient(xy[:, 0], s))
+    return np.column_stack([xy, heading])
 
 
 def _beacons(t: Traverse, spacing_m: float) -> np.ndarray:
-    """Beacon positions (k × 2, m) by the left wall, every ``spacing_m`` from ``first_beacon_m``."""
-    xs = np.arange(t.first_beacon_m, t.path_m + spacing_m, spacing_m)
-    return np.column_stack([xs, np.full(len(xs), t.tube_width_m / 2 - t.wall_offset_m)])
+    """Beacons by the left wall, every ``spacing_m`` along the tube from ``first_beacon_m``: k × 3
+    (x, y, the tube's heading where each stands; m, m, rad)."""
+    s = np.arange(t.first_beacon_m, t.path_m + spacing_m, spacing_m)
+    xy, heading = t.tube.at(s, t.tube_width_m / 2 - t.wall_offset_m)
+    return np.column_stack([xy, heading])
 
 
 @dataclass(frozen=True)
@@ -312,19 +348,21 @@ class Sighting:
 def sightings(t: Traverse, fov_rad: float, d_t_m: float, robot: np.ndarray, beacons: np.ndarray) -> list[Sighting]:
     """Every beacon side in a ring camera's horizontal field (``fov_rad``, the lens's) at the robot's
     true pose (x, y, heading): per camera and beacon the side whose outward normal is closest to the
-    direction to the camera, when the camera is in front of it."""
+    direction to the camera, when the camera is in front of it and the tube's walls do not hide it."""
     out = []
+    tube = t.tube
     for k in range(t.cameras_n):
         axis = robot[2] + 2 * math.pi * k / t.cameras_n
         cam = robot[:2] + t.radius_m * np.array([math.cos(axis), math.sin(axis)])
-        for b, centre in enumerate(beacons):
+        for b, (*centre, facing) in enumerate(beacons):
+            centre = np.asarray(centre)
             to_cam = math.atan2(*(cam - centre)[::-1])
-            side = min(SIDE_ANGLES, key=lambda s: abs(math.remainder(to_cam - SIDE_ANGLES[s], 2 * math.pi)))
-            alpha = SIDE_ANGLES[side]  # beacons face along the tube (heading 0)
+            side = min(SIDE_ANGLES, key=lambda s: abs(math.remainder(to_cam - SIDE_ANGLES[s] - facing, 2 * math.pi)))
+            alpha = SIDE_ANGLES[side] + facing  # red faces along the tube where the beacon stands
             origin = centre + d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
             rel = _rot(-alpha) @ (cam - origin)
             bearing = math.remainder(math.atan2(*(origin - cam)[::-1]) - axis, 2 * math.pi)
-            if rel[0] <= 0 or abs(bearing) > fov_rad / 2:
+            if rel[0] <= 0 or abs(bearing) > fov_rad / 2 or not tube.clear(cam, origin):
                 continue
             psi = math.remainder(axis - alpha, 2 * math.pi)
             out.append(Sighting(k, b, side, float(rel[0]), float(rel[1]), psi, bearing))
@@ -335,8 +373,8 @@ def _robot_pose(t: Traverse, beacons: np.ndarray, d_t_m: float, camera: int, bea
     """The robot's global planar pose from a camera's pose ``est`` (u, v, ψ) in ``side``'s target frame
     of ``beacon``, through the beacon's known pose and the camera's mount, with ``cov`` propagated."""
     mount = 2 * math.pi * camera / t.cameras_n
-    alpha = SIDE_ANGLES[side]
-    origin = beacons[beacon] + d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
+    alpha = SIDE_ANGLES[side] + beacons[beacon, 2]
+    origin = beacons[beacon, :2] + d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
     heading = est[2] + alpha - mount
     offset = t.radius_m * np.array([math.cos(mount), math.sin(mount)])
     position = origin + _rot(alpha) @ np.asarray(est[:2]) - _rot(heading) @ offset
@@ -390,6 +428,8 @@ def frame_task(t: Traverse, s: Sighting, seed: int) -> dict:
         "environment": "dark",
         "led_current_mA": t.led_current_mA,
     }
+    if t.dust_extinction_per_m:
+        scenario["dust_extinction_per_m"] = t.dust_extinction_per_m
     return FrameTask(scenario=scenario, seed=seed, full_frame=True, rectification={"alpha": 1.0}).to_dict()
 
 
@@ -519,7 +559,7 @@ def simulate(
     rng = np.random.default_rng([seed, round(spacing_m * 1000)])  # what the cameras see
     slip_low, slip_high = LOOSE_SAND["slip"]
     odo = WheelOdometry(**{"slip": float(ground.uniform(slip_low, slip_high)), **t.odometry})
-    truth = _truth(t)
+    truth, along = _truth(t), _along(t)
     beacons = _beacons(t, spacing_m)
     ring = _ring(t)
     cache: dict = {} if covariances is None else covariances
@@ -554,7 +594,7 @@ def simulate(
                 "spacing_m": spacing_m,
                 "seed": seed,
                 "step": i,
-                "distance_m": float(truth[i, 0]),
+                "distance_m": float(along[i]),
                 "true_x_m": truth[i, 0],
                 "true_y_m": truth[i, 1],
                 "odometry_x_m": x_odo[0],
@@ -632,6 +672,11 @@ def run(
     stopped run resumes; ``workers`` processes) instead of drawn from ``table``, which then only bounds
     the ranges rendered (:data:`RENDER_RANGE_FACTOR`). ``progress``: the display of the frames, then of
     the runs."""
+    if t.dust_extinction_per_m and not rendered:
+        raise ValueError(
+            "dust_extinction_per_m: dust acts on rendered frames (the detection table was measured in clear air); "
+            "run with rendered frames"
+        )
     t0 = time.perf_counter()
     out = Path(out)
     frames, covariances = [], {}  # the CRLB at a range and yaw is the same in every run
@@ -737,7 +782,13 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rep = Report(f"Traverse: {t.cameras_n} × {t.camera} ring through a {t.path_m:g} m lava tube")
+    bend = (
+        f" with a {abs(t.bend_deg):g}° {'left' if t.bend_deg > 0 else 'right'} bend at {t.bend_at_m:g} m"
+        if t.bend_deg
+        else ""
+    )
+    dust = f", dust of {visual_range_m(t.dust_extinction_per_m):.3g} m visual range" if t.dust_extinction_per_m else ""
+    rep = Report(f"Traverse: {t.cameras_n} × {t.camera} ring through a {t.path_m:g} m lava tube{bend}{dust}")
     rep.lead(
         [
             f"Largest beacon spacing that keeps the position error under {summary['spacing']['threshold_m']:g} m: "
@@ -790,8 +841,16 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
         )
     seed0 = steps[steps.seed == steps.seed.min()]
     spacings = sorted(set(seed0.spacing_m))
-    fig, axes = plt.subplots(len(spacings), 1, figsize=(10, 2.2 * len(spacings)), squeeze=False)
-    for ax, spacing in zip(axes[:, 0], spacings, strict=True):
+    walls = [t.tube.at(np.linspace(0.0, t.path_m + 2.0, 400), side * t.tube_width_m)[0] for side in (-0.5, 0.5)]
+    if t.bend_deg:  # a floor plan to scale, one panel per spacing
+        cols = min(4, len(spacings))
+        rows_n = -(-len(spacings) // cols)
+        fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 4.6 * rows_n), squeeze=False)
+        for ax in axes.flat[len(spacings) :]:
+            ax.set_visible(False)
+    else:
+        fig, axes = plt.subplots(len(spacings), 1, figsize=(10, 2.2 * len(spacings)), squeeze=False)
+    for ax, spacing in zip(axes.flat, spacings, strict=False):  # a grid may hold spare panels
         g = seed0[seed0.spacing_m == spacing]
         ax.plot(g.true_x_m, g.true_y_m, "k-", lw=1.5, label="truth")
         ax.plot(g.odometry_x_m, g.odometry_y_m, "C3--", lw=1, label="odometry alone")
@@ -799,12 +858,22 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
         ax.plot(g.fix_x_m, g.fix_y_m, "C2.", ms=3, label="fused fixes")
         b = _beacons(t, spacing)
         ax.plot(b[:, 0], b[:, 1], "k^", ms=6, label="beacons")
-        ax.axhline(t.tube_width_m / 2, color="0.6", lw=0.8)
-        ax.axhline(-t.tube_width_m / 2, color="0.6", lw=0.8)
-        ax.set_ylabel(f"{spacing:g} m apart\ny, m")
-        ax.set_xlim(-1, t.path_m + 1)
-    axes[-1, 0].set_xlabel("distance along the tube, m")
-    axes[0, 0].legend(fontsize=7, ncol=5, loc="upper left")
+        for xy in walls:
+            ax.plot(xy[:, 0], xy[:, 1], color="0.6", lw=0.8)
+        if t.bend_deg:
+            box = np.vstack(walls)
+            ax.set_xlim(box[:, 0].min() - 2, box[:, 0].max() + 2)
+            ax.set_ylim(box[:, 1].min() - 2, box[:, 1].max() + 2)
+            ax.set_aspect("equal")
+            ax.set_title(f"beacons {spacing:g} m apart", fontsize=10)
+            ax.set_xlabel("x, m")
+            ax.set_ylabel("y, m")
+        else:
+            ax.set_ylabel(f"{spacing:g} m apart\ny, m")
+            ax.set_xlim(-1, t.path_m + 1)
+    if not t.bend_deg:
+        axes[-1, 0].set_xlabel("distance along the tube, m")
+    axes[0, 0].legend(fontsize=7, ncol=1 if t.bend_deg else 5, loc="upper left")
     fig.tight_layout()
     rep.figure(fig, "The path from above (first seed): truth, odometry alone, the filter and the fused fixes")
     fig, ax = plt.subplots(figsize=(10, 3.2))

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from scenes.dust import extinction_per_m
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, out_path, parse_list, rich_progress
 from studies.cli.out_folder import prepare_out_dir
@@ -45,6 +46,22 @@ def traverse(
         ),
     ] = False,
     step_m: Annotated[float, typer.Option("--step-m", help="Odometry step, m.")] = 0.25,
+    bend_deg: Annotated[
+        float,
+        typer.Option("--bend-deg", help="The tube turns by this angle (degrees, positive to the left; 0: straight)."),
+    ] = 0.0,
+    bend_at_m: Annotated[float, typer.Option("--bend-at-m", help="Where along the tube the bend starts, m.")] = 20.0,
+    bend_radius_m: Annotated[
+        float, typer.Option("--bend-radius-m", help="Radius of the bend's centreline, m (> half the width).")
+    ] = 6.0,
+    dust_visibility_m: Annotated[
+        float | None,
+        typer.Option(
+            "--dust-visibility-m",
+            help="Airborne dust of this visual range (Koschmieder: extinction 3.912 / V per m); needs --rendered.",
+            show_default="clear air",
+        ),
+    ] = None,
     quick: Annotated[
         bool,
         typer.Option(
@@ -69,9 +86,15 @@ def traverse(
         raise UsageError(f"seeds: expected an integer >= 1, got {seeds}")
     if not threshold_m > 0:
         raise UsageError(f"threshold-m: expected an error > 0 m, got {threshold_m:g}")
+    if dust_visibility_m is not None and not dust_visibility_m > 0:
+        raise UsageError(f"dust-visibility-m: expected a visual range > 0 m, got {dust_visibility_m:g}")
+    if dust_visibility_m is not None and not rendered:
+        raise UsageError("dust-visibility-m: dust acts on rendered frames; add --rendered")
     settings = tr.Traverse(
-        camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m, step_m=step_m
-    )
+        camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m, step_m=step_m,
+        bend_deg=bend_deg, bend_at_m=bend_at_m, bend_radius_m=bend_radius_m,
+        dust_extinction_per_m=0.0 if dust_visibility_m is None else extinction_per_m(dust_visibility_m),
+    )  # fmt: skip
     source = detections or tr.DEFAULT_TABLE
     try:
         settings.validate()

@@ -108,3 +108,28 @@ def test_overrides_round_trip_and_stay_out_of_a_nominal_scenario_dict():
     assert Scenario.from_dict(s.to_dict()) == s and "data" not in _scenario().to_dict()
     assert s.led.luminous_intensity_cd == 6.0 and s.diffuser.foam_optics().thickness_m == pytest.approx(4e-3)
     assert s.without_gains().data == (("diffusers.foam.thickness_mm", 4.0),)
+
+
+def test_dust_attenuates_the_same_render_by_beer_lambert(tmp_path, mitsuba_variant):
+    """Dust of extinction σ over the range r passes exp(−σ r) of every LED's light (Beer–Lambert),
+    from the same cached render; 10 m Koschmieder visibility (σ = 3.912 / 10 m⁻¹) over 3 m leaves
+    0.309. Dust beside room light is refused in one line, and clear air keeps the scenario's keys."""
+    cache = RenderCache(tmp_path)
+    clear = render(_scenario(), cache)
+    dusty_scenario = Scenario(camera="logitech-c270", range_m=3.0, render=TINY, dust_extinction_per_m=0.3912)
+    dusty = render(dusty_scenario, cache)
+    assert dusty.from_cache
+    assert dusty_scenario.dust_transmittance == pytest.approx(np.exp(-0.3912 * 3.0), rel=1e-12)
+    for name in ("led:red", "led:green"):
+        a, b = (next(c for c in r.components if c.name == name) for r in (clear, dusty))
+        lit = a.image_W_m2_sr > 0
+        np.testing.assert_allclose(b.image_W_m2_sr[lit] / a.image_W_m2_sr[lit], 0.30925, rtol=1e-5)
+    held = next(c for c in with_emission(clear, dusty_scenario).components if c.name == "led:red")
+    np.testing.assert_array_equal(
+        held.image_W_m2_sr, next(c for c in dusty.components if c.name == "led:red").image_W_m2_sr
+    )
+    assert "dust_extinction_per_m" not in _scenario().to_dict()
+    with pytest.raises(ScenarioError, match=r"^dust_extinction_per_m: dust only in an environment without ambient"):
+        Scenario(environment="lit-room", dust_extinction_per_m=0.1)
+    with pytest.raises(ScenarioError, match=r"^dust_extinction_per_m: expected an extinction coefficient >= 0"):
+        Scenario(dust_extinction_per_m=-0.1)

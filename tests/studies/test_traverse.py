@@ -29,7 +29,9 @@ def test_without_noise_every_detection_gives_the_robots_exact_pose(monkeypatch):
     ring = tr._ring(t)
     draw = tr._TableDetections(t, ring, _Always(), {})
     rng = np.random.default_rng(0)
-    beacons = np.array([[3.0, 1.2], [-3.0, -1.0], [0.5, 4.0], [1.0, -4.5]])
+    beacons = np.array(
+        [[3.0, 1.2, 0.0], [-3.0, -1.0, 0.0], [0.5, 4.0, 0.0], [1.0, -4.5, 0.0], [4.0, 3.0, 0.6], [-4.0, 2.0, -1.2]]
+    )  # x, y and the way each faces (as in a bend)
     sides, cameras = set(), set()
     for heading in np.linspace(-math.pi, math.pi, 9):
         robot = np.array([0.2, -0.1, heading])
@@ -51,7 +53,7 @@ def test_a_sightings_frame_task_is_the_same_pose():
 
     t = tr.Traverse()
     ring = tr._ring(t)
-    beacons = np.array([[3.0, 1.2], [6.0, 1.2]])
+    beacons = np.array([[3.0, 1.2, 0.0], [6.0, 1.2, 0.4]])
     seen = []
     for heading in (0.0, 0.4, -0.7, 2.0):
         seen += tr.sightings(t, ring.fov_rad, ring.d_t_m, np.array([0.0, -0.2, heading]), beacons)
@@ -71,7 +73,7 @@ def test_a_rendered_noise_free_sighting_gives_the_robots_pose():
     range-limit frames at 30° do.)"""
     t = tr.Traverse()
     ring = tr._ring(t)
-    beacons = np.array([[2.5, 1.2]])
+    beacons = np.array([[2.5, 1.2, 0.0]])
     robot = np.array([0.0, 0.0, 0.0])
     seen = [
         s
@@ -151,6 +153,10 @@ def test_a_table_interpolates_the_measured_fractions():
         (["--camera", "canon-t6-18mm", "--detections", "nope.json"], "detections"),
         (["--camera", "mvbluefox3-2016c-8mm"], "camera"),
         (["--cameras-n", "1"], "cameras_n"),
+        (["--bend-deg", "190"], "bend_deg"),
+        (["--bend-deg", "90", "--bend-radius-m", "1"], "bend_radius_m"),
+        (["--dust-visibility-m", "10"], "dust-visibility-m"),
+        (["--rendered", "--dust-visibility-m", "0"], "dust-visibility-m"),
     ],
 )
 def test_bad_input_is_one_line_before_any_work(monkeypatch, tmp_path, args, field):
@@ -200,3 +206,34 @@ def test_a_rendered_traverse_runs_and_resumes(tmp_path):
     again = tr.run(tmp_path, t, spacings_m=(10.0,), seeds=1, threshold_m=1.0, table=table, rendered=True, workers=1)
     assert sorted(p.name for p in (tmp_path / "tasks").rglob("*.json")) == stored
     assert {k: v for k, v in again.items() if k != "wall_s"} == {k: v for k, v in first.items() if k != "wall_s"}
+
+
+def test_a_bends_inner_wall_hides_the_beacons_around_it(monkeypatch):
+    """A 90° left bend (radius 6 m, tube 3 m wide): every sighting's line from camera to side stays
+    clear of the inner wall, whose inside is the set within R − w/2 of the quadrant beyond the corner
+    (an independent answer), some beacons seen along a straight sight line are hidden by it, and the
+    beacons stand by the left wall facing along the tube where they are."""
+    t = tr.Traverse(bend_deg=90.0, bend_at_m=20.0, bend_radius_m=6.0)
+    ring = tr._ring(t)
+    beacons = tr._beacons(t, 5.0)
+    xy, facing = t.tube.centreline([5.0 * k for k in range(len(beacons))])
+    assert np.hypot(*(beacons[:, :2] - xy).T) == pytest.approx(t.tube_width_m / 2 - t.wall_offset_m)
+    assert beacons[:, 2] == pytest.approx(facing)
+
+    def blocked(a, b):  # the segment comes within R - w/2 of the quadrant {x <= 20, y >= 6}
+        p = a + np.linspace(0, 1, 4000)[:, None] * (b - a)
+        return np.hypot(np.maximum(p[:, 0] - 20.0, 0.0), np.maximum(6.0 - p[:, 1], 0.0)).min() < 4.5
+
+    truth = tr._truth(t)
+    seen = [s for pose in truth[::4] for s in tr.sightings(t, ring.fov_rad, ring.d_t_m, pose, beacons)]
+    monkeypatch.setattr(tr.Tube, "clear", lambda self, a, b, step_m=0.05: True)
+    every = [s for pose in truth[::4] for s in tr.sightings(t, ring.fov_rad, ring.d_t_m, pose, beacons)]
+    assert len(every) > len(seen) > 0
+    hidden = {(s.camera, s.beacon, s.side, round(s.u_m, 9)) for s in every} - {
+        (s.camera, s.beacon, s.side, round(s.u_m, 9)) for s in seen
+    }
+    for s in every:  # the camera from the sighting's pose in the side's frame, the side from the beacon's
+        alpha = tr.SIDE_ANGLES[s.side] + beacons[s.beacon, 2]
+        side = beacons[s.beacon, :2] + ring.d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
+        cam = side + tr._rot(alpha) @ np.array([s.u_m, s.v_m])
+        assert blocked(cam, side) == ((s.camera, s.beacon, s.side, round(s.u_m, 9)) in hidden)
