@@ -15,6 +15,7 @@ the crop, away from its edges (a check of the whole-frame path).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -174,6 +175,7 @@ def capture(
     noise: bool = True,
     reference: bool = False,
     view: NDArray[np.float64] | None = None,
+    others: Sequence[tuple[SpectralRadiance, NDArray[np.float64] | None]] = (),
 ) -> Capture:
     """Simulate the frame the camera records for a render.
 
@@ -202,6 +204,10 @@ def capture(
     view
         The camera turned off the render's axis (:meth:`scenes.scenario.Scenario.view_rotation`;
         :func:`camera_models.optics.optical_image`); None: not turned.
+    others
+        Renders of further beacons in the same frame, each with its own ``view``: their light is
+        added to the whole frame (light is linear); automatic exposure meters the first render and
+        the background only (a few more lit faces move a frame's mean by far less than a code).
     """
     if not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
@@ -216,8 +222,16 @@ def capture(
     t = exposure.exposure_s
     if full:
         mean = full_frame_mosaic(opt.electrons_rgb * t, opt.x0, opt.y0, camera, None if bg is None else bg * t)
+        for other, other_view in others:
+            more = optical_image(other, camera, 1.0, n, view=other_view)
+            h, w = more.electrons_rgb.shape[:2]
+            mean[more.y0 : more.y0 + h, more.x0 : more.x0 + w] += mosaic(
+                more.electrons_rgb * t, camera.sensor.cfa, more.x0, more.y0
+            )
         x0 = y0 = 0
     else:
+        if others:
+            raise ValueError("others: further beacons need the whole frame (full=True)")
         x0, y0 = opt.x0, opt.y0
         mean = mosaic(opt.electrons_rgb * t, camera.sensor.cfa, x0, y0)
     settings = SensorSettings(t, exposure.analog_gain)

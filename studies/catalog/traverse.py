@@ -14,14 +14,15 @@ from one of two sources:
   around the truth with the Cramér–Rao covariance of the marker centroids
   (:func:`pipeline.crlb.planar_covariance`, centroid noise :data:`CENTROID_SD_PX`). Every detection is
   a correct one, every side behaves as the red side the range-limit table ran.
-* **rendered** (``rendered=True``, ``--rendered``): a whole frame per sighting (:func:`frame_task`,
-  :func:`traverse_frame`): the side at its range and yaw, the camera turned by the bearing
-  (``Scenario.pan_deg``, so the lens's distortion and vignetting act where the beacon really falls),
-  the dark tube, the best tracker and estimator after the lens's rectification; the side the detector
-  names and the pose it estimates are what the robot gets, wrong ones included; the measurement
-  covariance is the estimator's error measured on those frames per range band
-  (:func:`error_covariances`). Frames are stored in ``out/tasks`` (a stopped run resumes) and shared
-  by the spacings and runs that see the same thing.
+* **rendered** (``rendered=True``, ``--rendered``): a whole frame per ring camera and step holding
+  every beacon it sees (:func:`camera_frames`, :func:`frame_task`, :func:`traverse_frame`): each side
+  at its range and yaw, the camera turned by the bearing (``Scenario.pan_deg``, so the lens's
+  distortion and vignetting act where each beacon really falls), the dark tube, the best tracker and
+  estimator after the lens's rectification; the side the detector names and the pose it estimates
+  are what the robot gets, wrong ones included, and the robot takes it for the beacon in view whose
+  pose fits its prediction best; the measurement covariance is the estimator's error measured on
+  those frames per range band (:func:`error_covariances`). Frames are stored in ``out/tasks`` (a
+  stopped run resumes) and shared by the spacings and runs that see the same thing.
 
 Each detection's pose in the side's target frame is turned into the robot's global pose through the
 beacon's known pose and the camera's mount, with its covariance propagated; detections farther than
@@ -35,9 +36,9 @@ Dust (``dust_extinction_per_m``, rendered frames only) dims every beacon's light
 its range (:attr:`scenes.scenario.Scenario.dust_transmittance`; the light it scatters into the view
 is left out, so it costs at least that much).
 
-What this is not (yet): several beacons in one rendered frame, the tube's own walls in the frames
-(they use the dark environment's basalt box), slip that changes along the run; the beacon is
-associated with the right one by the robot (its identity is not detected).
+What this is not (yet): the tube's own walls in the frames (they use the dark environment's basalt
+box around each beacon), slip that changes along the run. The beacons the robot chooses among are
+those truly in a camera's view (a robot would take them from its map around its predicted pose).
 
 Outputs in ``out``: ``steps.parquet`` (one row per spacing × seed × step: truth, odometry, fix and
 filter poses, their errors, the detections, gated ones and ones that named another side),
@@ -90,6 +91,7 @@ __all__ = [
     "RenderedDetections",
     "Sighting",
     "Traverse",
+    "camera_frames",
     "error_covariances",
     "frame_task",
     "largest_spacing",
@@ -391,7 +393,9 @@ class _TableDetections:
     def __init__(self, t: Traverse, ring: _Ring, table: DetectionTable, covariances: dict):
         self.t, self.ring, self.table, self.cov = t, ring, table, covariances
 
-    def __call__(self, step: int, seen: list[Sighting], rng) -> list[tuple[Sighting, str, np.ndarray, np.ndarray]]:
+    def __call__(
+        self, step: int, seen: list[Sighting], rng
+    ) -> list[list[tuple[Sighting, str, np.ndarray, np.ndarray]]]:
         out = []
         for s in seen:
             if rng.random() >= self.table.probability(s.range_m, s.yaw_deg):
@@ -400,7 +404,7 @@ class _TableDetections:
             if key not in self.cov:
                 self.cov[key] = _target_covariance(self.t, self.ring, *key)
             est = np.array([s.u_m, s.v_m, s.psi_rad]) + rng.multivariate_normal(np.zeros(3), self.cov[key])
-            out.append((s, s.side, est, self.cov[key]))
+            out.append([(s, s.side, est, self.cov[key])])  # a detection of its own beacon
         return out
 
 
@@ -412,12 +416,21 @@ def planar_in_target(pose: Pose) -> tuple[float, float, float]:
     return float(p[0]), float(-p[1]), float(math.atan2(-axis[1], axis[0]))
 
 
-def frame_task(t: Traverse, s: Sighting, seed: int) -> dict:
+def frame_task(t: Traverse, s: Sighting, seed: int, others: Sequence[Sighting] = ()) -> dict:
     """The whole-frame task of a sighting: the side at its range and yaw (the scenario's yaw is the
     target frame's, the sighting's mirrored), the camera turned by the bearing (``pan_deg``), the
     ring at marker 1's height (assumed: the study's ring and beacon heights are not given), the dark
     tube, the traverse's LED drive; detected after rectification with the lens's own distortion
-    (an ideal calibration, keeping the whole field: ``alpha`` 1)."""
+    (an ideal calibration, keeping the whole field: ``alpha`` 1). ``others``: the further beacons the
+    same camera sees at that instant, in the same frame (:attr:`FrameTask.others`)."""
+    task = FrameTask(scenario=_scenario(t, s), seed=seed, full_frame=True, rectification={"alpha": 1.0}).to_dict()
+    if others:
+        task["others"] = [_scenario(t, o) for o in others]
+    return task
+
+
+def _scenario(t: Traverse, s: Sighting) -> dict:
+    """The Scenario fields of a sighting (:func:`frame_task`)."""
     scenario = {
         "beacon": t.beacon,
         "side": s.side,
@@ -430,11 +443,21 @@ def frame_task(t: Traverse, s: Sighting, seed: int) -> dict:
     }
     if t.dust_extinction_per_m:
         scenario["dust_extinction_per_m"] = t.dust_extinction_per_m
-    return FrameTask(scenario=scenario, seed=seed, full_frame=True, rectification={"alpha": 1.0}).to_dict()
+    return scenario
+
+
+def camera_frames(seen: Sequence[Sighting], max_range_m: float) -> list[list[Sighting]]:
+    """The frames of one instant: per ring camera, the beacon sides it sees within ``max_range_m``,
+    nearest first (the frame is scored against the nearest; the rest are in it too)."""
+    by_camera: dict[int, list[Sighting]] = {}
+    for s in seen:
+        if s.range_m <= max_range_m:
+            by_camera.setdefault(s.camera, []).append(s)
+    return [sorted(group, key=lambda s: s.range_m) for _, group in sorted(by_camera.items())]
 
 
 def traverse_frame(task: dict) -> list[dict]:
-    """One sighting's frame rendered, captured and detected (best tracker and estimator): the side
+    """One camera's frame rendered, captured and detected (best tracker and estimator): the side
     named, the camera's planar pose in that side's target frame (:func:`planar_in_target`; NaN without
     a pose) and the true one."""
     task = FrameTask.coerce(task)
@@ -519,26 +542,29 @@ def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) 
 
 
 class RenderedDetections:
-    """Detections from rendered frames (:func:`traverse_frame` rows by task): a sighting is detected
-    when its frame gave a pose, on the side the detector named (a wrong side is an outlier the filter
-    must gate); its covariance the estimator's measured one at the estimated range
-    (:func:`error_covariances`). Sightings beyond ``max_range_m`` were not rendered: missed."""
+    """Detections from rendered frames (:func:`traverse_frame` rows by task), one frame per ring camera
+    holding every beacon it sees (:func:`camera_frames`): a frame that gave a pose is a detection of
+    the side the detector named (a wrong side is an outlier the filter must gate), its covariance the
+    estimator's measured one at the estimated range (:func:`error_covariances`). Which beacon it is
+    the robot decides: each beacon in the frame is a candidate (:func:`simulate` keeps the one whose
+    robot pose lies nearest the filter's prediction). Sightings beyond ``max_range_m`` were not
+    rendered: missed, and not in any frame."""
 
     def __init__(self, t: Traverse, rows: dict[str, dict], seed: int, max_range_m: float, bands: list[dict]):
         self.t, self.rows, self.seed, self.max_range_m, self.bands = t, rows, seed, max_range_m, bands
 
-    def __call__(self, step: int, seen: list[Sighting], rng) -> list[tuple[Sighting, str, np.ndarray, np.ndarray]]:
+    def __call__(
+        self, step: int, seen: list[Sighting], rng
+    ) -> list[list[tuple[Sighting, str, np.ndarray, np.ndarray]]]:
         out = []
-        for s in seen:
-            if s.range_m > self.max_range_m:
-                continue
-            row = self.rows[json.dumps(frame_task(self.t, s, self.seed), sort_keys=True)]
+        for nearest, *others in camera_frames(seen, self.max_range_m):
+            row = self.rows[json.dumps(frame_task(self.t, nearest, self.seed, others), sort_keys=True)]
             if not row["side_detected"] or not math.isfinite(row["u_m"]):
                 continue
             est = np.array([row["u_m"], row["v_m"], row["psi_rad"]])
             r = float(math.hypot(est[0], est[1]))
-            band = next(b for b in self.bands if b["low_m"] <= r < b["high_m"])
-            out.append((s, row["side_detected"], est, np.asarray(band["covariance"])))
+            cov = np.asarray(next(b for b in self.bands if b["low_m"] <= r < b["high_m"])["covariance"])
+            out.append([(s, row["side_detected"], est, cov) for s in (nearest, *others)])
         return out
 
 
@@ -577,10 +603,13 @@ def simulate(
             q = odo.step_covariance(d_hat[i - 1], bias=False)  # the bias is the filter's scale state
             x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q, scale_walk=SCALE_WALK_PER_M)
         found = detect_at(i, sightings(t, ring.fov_rad, ring.d_t_m, truth[i], beacons), rng)
-        poses = [
-            (s, side, _robot_pose(t, beacons, ring.d_t_m, s.camera, s.beacon, side, est, c))
-            for s, side, est, c in found
-        ]
+        poses = []
+        for candidates in found:  # one detection per frame: the beacon whose pose fits the prediction best
+            chosen = [
+                (s, side, _robot_pose(t, beacons, ring.d_t_m, s.camera, s.beacon, side, est, c))
+                for s, side, est, c in candidates
+            ]
+            poses.append(min(chosen, key=lambda p: mahalanobis2(x_ekf, p_ekf, p[2].vector, p[2].covariance)))
         kept = [
             (s, side, pose)
             for s, side, pose in poses
@@ -689,11 +718,11 @@ def run(
         for spacing in spacings_m:
             beacons = _beacons(t, float(spacing))
             for pose in _truth(t):
-                for s in sightings(t, ring.fov_rad, ring.d_t_m, pose, beacons):
-                    if s.range_m <= max_range_m:
-                        for seed in range(seeds):
-                            task = frame_task(t, s, seed)
-                            tasks.setdefault(json.dumps(task, sort_keys=True), task)
+                seen = sightings(t, ring.fov_rad, ring.d_t_m, pose, beacons)
+                for nearest, *others in camera_frames(seen, max_range_m):
+                    for seed in range(seeds):
+                        task = frame_task(t, nearest, seed, others)
+                        tasks.setdefault(json.dumps(task, sort_keys=True), task)
         done = run_tasks(
             list(tasks.values()),
             out,

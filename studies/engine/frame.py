@@ -109,7 +109,7 @@ class CapturedFrame:
         return self.capture.x0, self.capture.y0
 
 
-NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides")
+NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides", "others")
 """The task fields that make a frame's mean image, mixed into its noise seed (:func:`noise_seed`)."""
 
 
@@ -137,6 +137,7 @@ def capture_frame(task: FrameTask | dict) -> CapturedFrame:
     """Render (or reuse the render of) a frame task and capture it with its camera."""
     task = FrameTask.coerce(task)
     scenario, camera, radiance, background = frame_inputs(task)
+    others = other_beacons(task, scenario)
     settings = task.exposure or {}
     exposure = None
     if settings.get("iso") is not None or settings.get("exposure_s") is not None:
@@ -152,6 +153,7 @@ def capture_frame(task: FrameTask | dict) -> CapturedFrame:
         noise=task.with_noise,
         reference=bool(task.reference_camera),
         view=scenario.view_rotation(),
+        others=others,
     )
     image_bgr = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)  # what was saved
     return CapturedFrame(scenario, camera, cap, image_bgr)
@@ -381,6 +383,34 @@ def frame_inputs(task: FrameTask | dict):
     if task.align_px and not task.is_full_frame:  # a whole frame is aligned by itself
         radiance = aligned_radiance(radiance, int(task.align_px))
     return scenario, camera, radiance, background
+
+
+def other_beacons(task: FrameTask | dict, scenario: Scenario) -> tuple[tuple[SpectralRadiance, np.ndarray | None], ...]:
+    """The renders of a task's further beacons (``others``) with each one's view rotation: each a
+    Scenario of the task's camera, environment and render settings, rendered (or read from the
+    cache) at unit scale and given its own drive. Light transport is linear, so a frame with several
+    beacons is the sum of their renders; each render's own room adds the light its beacon scatters
+    off the walls near it. Only in whole frames, and only where nothing but the LEDs lights the room
+    (a second render's room light would count the room twice): one-line errors otherwise."""
+    task = FrameTask.coerce(task)
+    if not task.others:
+        return ()
+    if not task.is_full_frame:
+        raise ValueError("task.others: further beacons need a whole frame (full_frame: true)")
+    if scenario.env.has_ambient:
+        raise ValueError(
+            f"task.others: further beacons only where the LEDs alone light the room, not {scenario.environment!r}"
+        )
+    out = []
+    for i, fields in enumerate(task.others):
+        for name in ("camera", "environment"):
+            if fields.get(name, getattr(scenario, name)) != getattr(scenario, name):
+                raise ValueError(f"task.others[{i}].{name}: expected the frame's own ({getattr(scenario, name)!r})")
+        other = Scenario(**{**fields, "camera": scenario.camera, "environment": scenario.environment},
+                         render=scenario.render)  # fmt: skip
+        unit = render(other.without_gains(), RenderCache())
+        out.append((with_emission(unit, other), other.view_rotation()))
+    return tuple(out)
 
 
 def camera_with_overrides(camera: Camera, overrides: dict | None) -> Camera:

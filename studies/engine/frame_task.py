@@ -73,6 +73,11 @@ class FrameTask:
     thesis_morphology
         Morphology iterations of the study's tracker to replace, ``{"erode_iterations": 2}``
         (:data:`MORPHOLOGY_FIELDS`): the sessions in which the study says it changed them.
+    others
+        Further beacons in the same whole frame, each a table of Scenario fields like ``scenario``
+        (the same camera and environment; its own beacon, side, range, yaw, turn and drive): their
+        LEDs' light is added to the frame (:func:`studies.engine.frame.other_beacons`). The frame is
+        scored against ``scenario``'s beacon.
     """
 
     scenario: dict
@@ -92,6 +97,7 @@ class FrameTask:
     align_px: int | None = None
     camera_overrides: dict | None = None
     thesis_morphology: dict | None = None
+    others: list[dict] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.scenario, Mapping):
@@ -112,6 +118,10 @@ class FrameTask:
             value = getattr(self, name)
             if value is not None and not isinstance(value, bool):
                 raise ValueError(f"task.{name}: expected true or false, got {value!r}")
+        if self.others is not None and (
+            isinstance(self.others, Mapping | str) or not all(isinstance(o, Mapping) for o in self.others)
+        ):
+            raise ValueError(f"task.others: expected a list of tables of Scenario fields, got {self.others!r}")
         for name in ("trackers", "estimators"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, str) or not all(isinstance(v, str) for v in value)):

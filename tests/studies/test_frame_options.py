@@ -105,3 +105,56 @@ def test_a_tag_that_would_shadow_a_row_field_is_refused_before_any_work(monkeypa
     monkeypatch.setattr(frame, "capture_frame", lambda task: pytest.fail("rendered before the check"))
     with pytest.raises(ValueError, match=r"tags\.frame: a row field"):
         frame.simulate_frame({"scenario": {"range_m": 2.0}, "seed": 0, "tags": {"frame": "webcam_150mm_red_dark"}})
+
+
+def _two_beacons(**others_fields):
+    base = {"beacon": "v2", "side": "red", "camera": "canon-t6-18mm", "environment": "dark", "led_current_mA": 2.0}
+    a = {**base, "range_m": 5.0, "pan_deg": 4.0}  # appears left of centre
+    b = {**base, "side": "green", "range_m": 7.0, "yaw_deg": 20.0, "pan_deg": -3.0, **others_fields}  # right
+    plain = {"render": {"spp": 1, "oversampling": 1, "near_field_spp": 64}, "seed": 0, "full_frame": True,
+             "noise": False, "exposure": {"iso": 400, "exposure_s": 1 / 60}, "trackers": ["best"]}  # fmt: skip
+    return a, b, plain
+
+
+def test_a_frame_with_two_beacons_is_the_sum_of_each_alone():
+    """Light is linear: a noise-free whole frame holding beacons A and B has, on top of the black
+    level, the electrons of A's frame plus B's (raw DN within 1 of the sum, rounding), and B's light
+    falls where B's own frame puts it."""
+    from studies.engine.frame import capture_frame
+
+    a, b, plain = _two_beacons()
+    both = capture_frame({**plain, "scenario": a, "others": [b]}).capture.raw.astype(np.int64)
+    only_a = capture_frame({**plain, "scenario": a}).capture.raw.astype(np.int64)
+    only_b = capture_frame({**plain, "scenario": b}).capture.raw.astype(np.int64)
+    black = int(load_camera("canon-t6-18mm").sensor.black_level_DN)
+    assert np.abs(both - (only_a + only_b - black)).max() <= 1
+    lit_b = only_b - black > 50
+    assert lit_b.sum() > 20 and not (only_a - black > 50)[lit_b].any()  # B's markers, away from A's
+    assert (both - only_a)[lit_b].min() > 40
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"full_frame": False}, r"^task\.others: further beacons need a whole frame"),
+        ({"others_env": "lit-room"}, r"^task\.others: further beacons only where the LEDs alone light the room"),
+        ({"others_camera": "logitech-c270"}, r"^task\.others\[0\]\.camera: expected the frame's own"),
+        ({"others_bad": True}, r"^task\.others: expected a list of tables of Scenario fields"),
+    ],
+)
+def test_further_beacons_are_refused_in_one_line_where_they_cannot_be_added(change, message):
+    from studies.engine.frame import capture_frame
+
+    a, b, plain = _two_beacons()
+    task = {**plain, "scenario": a, "others": [b]}
+    if "full_frame" in change:
+        task["full_frame"] = False
+    if "others_env" in change:
+        task["scenario"] = {**a, "environment": "lit-room"}
+        task["others"] = [{**b, "environment": "lit-room"}]
+    if "others_camera" in change:
+        task["others"] = [{**b, "camera": "logitech-c270"}]
+    if "others_bad" in change:
+        task["others"] = b
+    with pytest.raises(ValueError, match=message):
+        capture_frame(task)

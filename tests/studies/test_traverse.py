@@ -35,7 +35,7 @@ def test_without_noise_every_detection_gives_the_robots_exact_pose(monkeypatch):
     sides, cameras = set(), set()
     for heading in np.linspace(-math.pi, math.pi, 9):
         robot = np.array([0.2, -0.1, heading])
-        for s, side, est, cov in draw(0, tr.sightings(t, ring.fov_rad, ring.d_t_m, robot, beacons), rng):
+        for ((s, side, est, cov),) in draw(0, tr.sightings(t, ring.fov_rad, ring.d_t_m, robot, beacons), rng):
             pose = tr._robot_pose(t, beacons, ring.d_t_m, s.camera, s.beacon, side, est, cov)
             assert pose.vector[:2] == pytest.approx(robot[:2], abs=1e-9)
             assert math.remainder(pose.heading_rad - heading, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
@@ -237,3 +237,36 @@ def test_a_bends_inner_wall_hides_the_beacons_around_it(monkeypatch):
         side = beacons[s.beacon, :2] + ring.d_t_m * np.array([math.cos(alpha), math.sin(alpha)])
         cam = side + tr._rot(alpha) @ np.array([s.u_m, s.v_m])
         assert blocked(cam, side) == ((s.camera, s.beacon, s.side, round(s.u_m, 9)) in hidden)
+
+
+def test_one_frame_per_camera_holds_every_beacon_it_sees_nearest_first():
+    t = tr.Traverse()
+    ring = tr._ring(t)
+    seen = tr.sightings(t, ring.fov_rad, ring.d_t_m, np.array([0.0, 0.0, 0.0]), tr._beacons(t, 4.0))
+    frames = tr.camera_frames(seen, 9.0)
+    assert sum(len(f) for f in frames) == sum(s.range_m <= 9.0 for s in seen) and max(map(len, frames)) > 1
+    for f in frames:
+        assert len({s.camera for s in f}) == 1 and [s.range_m for s in f] == sorted(s.range_m for s in f)
+    nearest, *others = next(f for f in frames if len(f) > 1)
+    task = tr.frame_task(t, nearest, 0, others)
+    assert task["scenario"] == tr.frame_task(t, nearest, 0)["scenario"] and len(task["others"]) == len(others)
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_a_detection_is_taken_for_the_beacon_in_view_whose_pose_fits(order):
+    """Frames holding several beacons: each detection is exact for the nearest one, and every beacon in
+    view is a candidate, listed in either order. The filter takes the one whose robot pose fits its
+    prediction, so it tracks the truth as with the right beacon given (fixes exact, error < 2 cm)."""
+    t = tr.Traverse(path_m=12.0)
+
+    def frames(step, seen, rng):
+        out = []
+        for nearest, *others in tr.camera_frames(seen, 20.0):
+            est = np.array([nearest.u_m, nearest.v_m, nearest.psi_rad])
+            out.append([(s, nearest.side, est, 1e-6 * np.eye(3)) for s in (nearest, *others)][::order])
+        return out
+
+    steps = tr.simulate(t, _Always(), 4.0, 0, detections=frames)
+    fixed = steps[steps.detections > 0]
+    assert len(fixed) > 0.9 * len(steps) and fixed.fix_error_m.max() < 1e-6
+    assert steps.filter_error_m.max() < 0.02 and steps.wrong_side.sum() == 0
