@@ -5,7 +5,9 @@ it. Visibility is the usual way to state σ: Koschmieder's law gives the distanc
 object's contrast against the sky falls to a threshold ε as V = −ln ε / σ; with Koschmieder's
 ε = 2 % (1924) σ V = 3.912, with the WMO's 5 % for the meteorological optical range 2.996. Light the
 dust scatters *into* the view (a veil, a halo around each marker) is not modelled: with it a marker
-would lose more contrast, so ranges found with dust are upper bounds.
+would lose more contrast, so ranges found with dust are upper bounds. Against Mitsuba's homogeneous
+medium (tests/scenes/test_dust.py) the direct view is exp(−σ d) within 1 % and the veil beside a lit
+disc is under 1 % of its radiance at 5-10 m visibility.
 
 >>> round(extinction_per_m(10.0), 4), round(transmittance(extinction_per_m(10.0), 10.0), 3)
 (0.3912, 0.02)
