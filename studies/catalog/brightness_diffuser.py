@@ -317,12 +317,14 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
             css_class="keys",
         )
     best = table[table.tracker == "best"]
+    window = best.groupby(["camera", "side", *SETTING[2:]]).in_window.all()
+    window = {key for key, inside in window.items() if inside}  # in the window at every range
     for (cam, side, r), g in best.groupby(["camera", "side", "nominal_range_m"]):
         rep.figure(
-            _heat_maps(plt, g),
+            _heat_maps(plt, g, window),
             f"{cam}, {side} side, {r:g} m (best tracker): per diffuser and LED drive, the fraction of frames "
             "detected correctly (with the frame counts), of correct colour, and the marker cores' clipped fraction; "
-            "boxed: in the window.",
+            "boxed: in the operating window (at every range).",
         )
     rep.heading("All configurations")
     shown = table.assign(
@@ -377,9 +379,10 @@ def _report(out: Path, options: StudyOptions, table, summary: dict) -> None:
     rep.write(out / "report.html")
 
 
-def _heat_maps(plt, g):
+def _heat_maps(plt, g, window: set):
     """Three heat maps (P(correct detection), P(correct colour), core saturation) of one
-    camera, side and range: rows the diffusers, columns the LED drives; numbers at 11 pt."""
+    camera, side and range: rows the diffusers, columns the LED drives; numbers at 11 pt; the
+    settings in ``window`` ((camera, side, drive, foam, sheets, colour) keys) boxed."""
     labels = [
         diffuser_text(bool(f), int(n), str(c))
         for f, n, c in g[["foam", "paper_sheets", "paper_colour"]].drop_duplicates().itertuples(index=False)
@@ -402,13 +405,13 @@ def _heat_maps(plt, g):
     ):
         grid = np.full((len(labels), len(currents)), np.nan)
         text = np.full(grid.shape, "", dtype=object)
-        window = np.zeros(grid.shape, dtype=bool)
+        boxed = np.zeros(grid.shape, dtype=bool)
         for row in g.itertuples(index=False):
             i = labels.index(diffuser_text(bool(row.foam), int(row.paper_sheets), str(row.paper_colour)))
             j = currents.index(row.led_current_mA)
             grid[i, j] = getattr(row, metric)
             text[i, j] = f"{row.successes}/{row.frames}" if metric == "p_detect" else f"{grid[i, j]:.2f}"
-            window[i, j] = bool(row.in_window)
+            boxed[i, j] = (row.camera, row.side, *(getattr(row, k) for k in SETTING[2:])) in window
         im = ax.imshow(grid, vmin=0, vmax=1, cmap=cmap, aspect="auto")
         ax.set_xticks(range(len(currents)), [f"{c:g}" for c in currents], fontsize=10)
         ax.set_xlabel("LED drive, mA", fontsize=10)
@@ -417,7 +420,7 @@ def _heat_maps(plt, g):
             if np.isfinite(v):
                 dark = v < 0.5 if cmap == "viridis" else v < 0.6
                 ax.text(j, i, text[i, j], ha="center", va="center", fontsize=11, color="white" if dark else "black")
-                if window[i, j]:
+                if boxed[i, j]:
                     ax.add_patch(plt.Rectangle((j - 0.46, i - 0.46), 0.92, 0.92, fill=False, ec="red", lw=2))
         fig.colorbar(im, ax=ax, fraction=0.08, pad=0.03)
     axes[0].set_yticks(range(len(labels)), labels, fontsize=10)

@@ -343,7 +343,7 @@ def test_every_curve_has_its_own_style(main_job):
 def test_heat_map_numbers_are_legible(main_job):
     table = brightness_diffuser.configuration_table(_brightness_frame())
     g = table[(table.tracker == "best") & (table.camera == T6)]
-    fig = brightness_diffuser._heat_maps(plt, g)
+    fig = brightness_diffuser._heat_maps(plt, g, set())
     width, _ = fig.get_size_inches()
     assert width <= PAGE_WIDTH_IN  # shown unscaled: 11 pt stays 11 pt (≈ 15 px)
     numbers = [t for ax in fig.axes for t in ax.texts]
