@@ -3,10 +3,10 @@
 A robot drives a lava tube (:class:`scenes.tube.Tube`: width ``tube_width_m``, straight or with one
 bend) along its centreline, wandering sideways; beacons stand by the left wall every D metres along
 it (each with its four sides facing along and across the tube where it stands). A bend's inner wall
-hides the beacons around it (a sight line must stay inside the tube). At every step of ``step_m`` its ring of cameras
-(:class:`pipeline.ring`'s geometry: N cameras on a circle of radius r, facing outward) looks for
-them: every camera with a beacon side in its horizontal field (:func:`sightings`) gives a detection,
-from one of two sources:
+hides the beacons around it (a sight line must stay inside the tube). At every step of ``step_m``
+its ring of cameras (:class:`pipeline.ring`'s geometry: N cameras on a circle of radius r, facing
+outward) looks for them: every camera with a beacon side in its horizontal field (:func:`sightings`)
+gives a detection, from one of two sources:
 
 * **drawn** (default): with the probability the camera's **rendered range-limit frames** measured at
   that range and yaw (:class:`DetectionTable`: the fraction of correct poses of a range-limit
@@ -580,7 +580,9 @@ def simulate(
     """One traverse at one beacon spacing (m): a row per step (module docstring). ``covariances``:
     the CRLB per (range, yaw) already computed for ``t`` (shared by the runs of one traverse);
     ``detections``: where the detections come from (default drawn from ``table``; a
-    :class:`RenderedDetections` for rendered frames)."""
+    :class:`RenderedDetections` for rendered frames): per frame a list of candidates (sighting, side
+    named, pose in that side's frame, covariance), one per beacon it may be; the candidate whose
+    robot pose fits the filter's prediction best is the frame's detection, then gated."""
     ground = np.random.default_rng(seed)  # the robot's slip and odometry noise: the same at every spacing
     rng = np.random.default_rng([seed, round(spacing_m * 1000)])  # what the cameras see
     slip_low, slip_high = LOOSE_SAND["slip"]
