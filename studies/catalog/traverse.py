@@ -697,12 +697,13 @@ def run(
     progress: Progress = no_progress,
     rendered: bool = False,
     workers: int | None = None,
+    scheduler: str | None = None,
 ) -> dict:
     """Every spacing × seed (module docstring); returns the summary. ``rendered``: the detections
-    from a rendered whole frame per sighting (:func:`traverse_frame`, stored in ``out/tasks`` so a
-    stopped run resumes; ``workers`` processes) instead of drawn from ``table``, which then only bounds
-    the ranges rendered (:data:`RENDER_RANGE_FACTOR`). ``progress``: the display of the frames, then of
-    the runs."""
+    from a rendered whole frame per camera and step (:func:`traverse_frame`, stored in ``out/tasks``
+    so a stopped run resumes; ``workers`` local processes, or the Dask ``scheduler`` at that address)
+    instead of drawn from ``table``, which then only bounds the ranges rendered
+    (:data:`RENDER_RANGE_FACTOR`). ``progress``: the display of the frames, then of the runs."""
     if t.dust_extinction_per_m and not rendered:
         raise ValueError(
             "dust_extinction_per_m: dust acts on rendered frames (the detection table was measured in clear air); "
@@ -730,6 +731,7 @@ def run(
             out,
             traverse_frame,
             workers=workers,
+            scheduler=scheduler,
             description="traverse frames",
             progress=progress,
             batch_key=render_batch_key,

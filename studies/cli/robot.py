@@ -9,7 +9,7 @@ import typer
 
 from scenes.dust import extinction_per_m
 from studies.cli import options as opt
-from studies.cli.common import UsageError, console, out_path, parse_list, rich_progress
+from studies.cli.common import UsageError, console, execution, out_path, parse_list, rich_progress
 from studies.cli.out_folder import prepare_out_dir
 
 __all__ = ["COMMANDS", "traverse"]
@@ -70,6 +70,7 @@ def traverse(
     ] = False,
     beacon: opt.Beacon = "v2",
     workers: opt.Workers = None,
+    scheduler: opt.Scheduler = None,
 ) -> None:
     """Drive a ring of cameras through a lava tube with beacons every D m: per step the detections, their
     fused pose and wheel odometry corrected by it (EKF); the largest spacing that keeps the error under
@@ -103,6 +104,7 @@ def traverse(
         table = tr.DetectionTable.from_summary(source, camera, beacon=beacon)
     except ValueError as exc:
         raise UsageError(str(exc).splitlines()[0]) from None
+    run_on = execution(workers, scheduler, cache=rendered)
     prepare_out_dir(out)
     summary = tr.run(
         out,
@@ -113,7 +115,8 @@ def traverse(
         table=table,
         progress=rich_progress,
         rendered=rendered,
-        workers=workers,
+        workers=run_on.workers,
+        scheduler=run_on.scheduler,
     )
     console.print(f"traverse: {summary['spacing_answer']}; {summary['wall_s']:.0f} s; wrote {out}/report.html")
 

@@ -157,6 +157,8 @@ def test_a_table_interpolates_the_measured_fractions():
         (["--bend-deg", "90", "--bend-radius-m", "1"], "bend_radius_m"),
         (["--dust-visibility-m", "10"], "dust-visibility-m"),
         (["--rendered", "--dust-visibility-m", "0"], "dust-visibility-m"),
+        (["--rendered", "--scheduler", "tcp://127.0.0.1:1"], "scheduler"),
+        (["--workers", "0"], "workers"),
     ],
 )
 def test_bad_input_is_one_line_before_any_work(monkeypatch, tmp_path, args, field):
