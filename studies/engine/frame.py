@@ -388,7 +388,7 @@ def frame_inputs(task: FrameTask | dict):
 def other_beacons(task: FrameTask | dict, scenario: Scenario) -> tuple[tuple[SpectralRadiance, np.ndarray | None], ...]:
     """The renders of a task's further beacons (``others``) with each one's view rotation: each a
     Scenario of the task's camera, environment and render settings, rendered (or read from the
-    cache) at unit scale and given its own drive. Light transport is linear, so a frame with several
+    cache) with its own drive. Light transport is linear, so a frame with several
     beacons is the sum of their renders; each render's own room adds the light its beacon scatters
     off the walls near it. Only in whole frames, and only where nothing but the LEDs lights the room
     (a second render's room light would count the room twice): one-line errors otherwise."""
@@ -408,8 +408,7 @@ def other_beacons(task: FrameTask | dict, scenario: Scenario) -> tuple[tuple[Spe
                 raise ValueError(f"task.others[{i}].{name}: expected the frame's own ({getattr(scenario, name)!r})")
         other = Scenario(**{**fields, "camera": scenario.camera, "environment": scenario.environment},
                          render=scenario.render)  # fmt: skip
-        unit = render(other.without_gains(), RenderCache())
-        out.append((with_emission(unit, other), other.view_rotation()))
+        out.append((render(other, RenderCache()), other.view_rotation()))
     return tuple(out)
 
 
