@@ -109,13 +109,14 @@ class CapturedFrame:
         return self.capture.x0, self.capture.y0
 
 
-NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides", "others")
+NOISE_SEED_FIELDS = ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides")
 """The task fields that make a frame's mean image, mixed into its noise seed (:func:`noise_seed`)."""
 
 
 def noise_seed(task: FrameTask | dict) -> int:
     """The sensor-noise seed of a frame task (a 63-bit integer): its ``seed`` hashed (SHA-256)
-    with the fields that make the frame (:data:`NOISE_SEED_FIELDS`).
+    with the fields that make the frame (:data:`NOISE_SEED_FIELDS`, and ``others`` where a task has
+    further beacons: mixed in only then, so every task without them keeps the seed it had).
 
     Frames that differ in anything (range, yaw, drive, camera, ...) draw independent noise, so
     outcomes across a study's conditions are independent trials. With the bare ``seed`` (frame
@@ -129,6 +130,8 @@ def noise_seed(task: FrameTask | dict) -> int:
     """
     plain = task.to_dict() if isinstance(task, FrameTask) else task
     what = [int(plain["seed"]), {k: plain.get(k) for k in NOISE_SEED_FIELDS}]
+    if plain.get("others"):
+        what.append(plain["others"])
     digest = hashlib.sha256(json.dumps(what, sort_keys=True, default=repr).encode()).digest()
     return int.from_bytes(digest[:8], "little") >> 1
 

@@ -158,3 +158,23 @@ def test_further_beacons_are_refused_in_one_line_where_they_cannot_be_added(chan
         task["others"] = b
     with pytest.raises(ValueError, match=message):
         capture_frame(task)
+
+
+def test_further_beacons_draw_their_own_noise_and_leave_every_other_seed_as_it_was():
+    """The noise seed of a task without ``others`` is the SHA-256 of its seed and its six mean-image
+    fields, as before further beacons existed (stored frames and reruns agree); a task with them
+    draws other noise."""
+    import hashlib
+    import json
+
+    from studies.engine.frame import NOISE_SEED_FIELDS
+
+    a, b, plain = _two_beacons()
+    task = {**plain, "scenario": a}
+    what = [
+        0,
+        {k: task.get(k) for k in ("scenario", "render", "exposure", "full_frame", "align_px", "camera_overrides")},
+    ]
+    before = int.from_bytes(hashlib.sha256(json.dumps(what, sort_keys=True).encode()).digest()[:8], "little") >> 1
+    assert "others" not in NOISE_SEED_FIELDS and noise_seed(task) == before
+    assert noise_seed({**task, "others": [b]}) != before
