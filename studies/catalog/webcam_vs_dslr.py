@@ -662,7 +662,10 @@ def _curves_figure(plt, frame, options: StudyOptions):
             )
         ax.axhline(0.95, color="grey", ls=":", lw=1)
         ax.set_title(f"{tracker} tracker, {current:g} mA", fontsize=11)
-        ax.set_xticks(ranges)
+        if len(ranges) <= 12:
+            ax.set_xticks(ranges)
+        else:  # a sequential design's added ranges: let matplotlib space the ticks
+            ax.xaxis.set_major_locator(plt.MaxNLocator(nbins=10, steps=[1, 2, 5, 10]))
         if i == 1:
             ax.set_xlabel("range, m", fontsize=10)
         if j == 0:
