@@ -796,11 +796,11 @@ def _source_text(detections: dict) -> str:
     """Where the report's detections came from, in words."""
     if detections["rendered"]:
         return (
-            f"Detections from {detections['frames']} rendered whole frames: every beacon side a ring camera "
-            f"had in its field within {detections['max_range_m']:g} m (1.5× the farthest correct pose of "
-            f"{detections['source']}; farther ones count as missed), the camera turned by the bearing, the dark "
-            "tube, detected by the best tracker and estimator after the lens's rectification; one beacon per "
-            "frame (another beacon in the same view, ≥ a spacing farther, is not in it)."
+            f"Detections from {detections['frames']} rendered whole frames, one per ring camera and step holding "
+            f"every beacon side it had in its field within {detections['max_range_m']:g} m (1.5× the farthest "
+            f"correct pose of {detections['source']}; farther ones count as missed), the camera turned by the "
+            "bearing, the dark tube, detected by the best tracker and estimator after the lens's rectification; "
+            "each detection taken for the beacon in view whose pose fits the filter's prediction best."
         )
     return (
         f"Detections from {detections['source']} (the camera's rendered range-limit frames: P(correct) as "
