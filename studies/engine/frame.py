@@ -45,7 +45,7 @@ from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 from studies.engine.frame_task import FrameTask
 
-FRAME_VERSION = 9
+FRAME_VERSION = 10
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.
 4: study tasks are whole frames by default (``full_frame``); rows carry ``frame`` (full or crop)
@@ -66,7 +66,10 @@ tracker counts every colour's blobs (``side_blobs`` of a side after the first wi
 0), its answer unchanged (issue 25).
 9: the study's tracker's rows carry its near-miss measures of the side's colour at the true markers
 (``side_box_distance``, ``side_in_box_fraction``, ``side_closed_height_px``, ``survivor_height_px``,
-``side_markers_merged``, ``side_markers_lost``: :mod:`pipeline.mask_measures`; issue 25)."""
+``side_markers_merged``, ``side_markers_lost``: :mod:`pipeline.mask_measures`; issue 25).
+10: the best tracker's noise σ is the median of small tiles' spreads, not the whole image's (a lit
+room's brightness variation had put its threshold above full scale: no blob in any lit-room Spedal
+920 frame; issue 24)."""
 
 
 ROW_FIELDS = frozenset(

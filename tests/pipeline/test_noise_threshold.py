@@ -82,3 +82,26 @@ def test_false_alarm_count_is_the_gaussian_tail():
     lo, hi = poisson.ppf([0.005, 0.995], expected)
     assert lo <= counts <= hi, (counts, expected)
     assert 5 < expected < 40  # about α = 1 per frame, less the rounding up to the next code
+
+
+def test_a_lit_scene_is_not_taken_for_noise():
+    """A lit room: the brightness varies across the frame (a ramp of 100 codes and a bright
+    window) on top of Gaussian noise of σ = 8 codes. σ is the noise's (2 %), and LEDs clipped
+    at code 255 are found at their centres; measured over the whole image, σ is the scene's
+    spread (~40 codes, as on a lit-room Spedal 920 frame) and the threshold lies above full scale: no blob at all."""
+    rng = np.random.default_rng(5)
+    vv, uu = np.mgrid[: SHAPE[0], : SHAPE[1]]
+    scene = 100.0 * uu / SHAPE[1] + 60.0 * ((uu > 1100) & (vv < 300))
+    centres = np.column_stack([200 + 110 * np.arange(10) + 0.4, 500 + 60 * (np.arange(10) % 4) + 0.7])
+    for u, v in centres:
+        scene = np.maximum(scene, 400.0 * np.exp(-((uu - u) ** 2 + (vv - v) ** 2) / (2 * 2.5**2)))
+    y = np.rint(scene + rng.normal(MEAN, SIGMA, SHAPE)).clip(0, 255).astype(np.uint8)
+    _, sigma, _ = noise_threshold(y, 1.0)
+    assert sigma == pytest.approx(SIGMA, rel=0.02)
+    upper = np.quantile(y, 0.75) - np.quantile(y, 0.5)
+    assert upper / norm.ppf(0.75) > 4 * SIGMA  # the whole image's spread: what frame versions 6-9 took for σ
+    blobs, reason = find_blobs(np.repeat(y[..., None], 3, axis=2), TrackerSettings())
+    assert reason is None
+    uv = np.array([(b.u, b.v) for b in blobs])
+    dist = np.hypot(*(uv[:, None, :] - centres[None, :, :]).transpose(2, 0, 1))
+    assert np.all(dist.min(axis=0) < 0.5)
