@@ -75,6 +75,15 @@ BudgetFrames = Annotated[
         show_default="the study's design",
     ),
 ]
+UnitBudgetFrames = Annotated[
+    int | None,
+    typer.Option(
+        "--unit-budget-frames",
+        help="Sequential design: frames one range-limit estimate (a unit) may spend, its coarse grid included; "
+        "a limit where P stays near 0.95 cannot take the others' frames.",
+        show_default="the study's design",
+    ),
+]
 Uncertainty = Annotated[
     int | None,
     typer.Option(

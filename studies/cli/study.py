@@ -35,6 +35,7 @@ DESIGN_OPTIONS = {
     "target_width_m": "target-width-m",
     "target_relative": "target-relative",
     "budget_frames": "budget-frames",
+    "unit_budget_frames": "unit-budget-frames",
     "ranges_m": "ranges-m",
 }
 """Sequential-design fields set on the command line, and their options."""
@@ -109,6 +110,7 @@ def study(
     target_width_m: opt.TargetWidthM = None,
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
+    unit_budget_frames: opt.UnitBudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
     physics_from: opt.PhysicsFrom = "calibration",
     workers: opt.Workers = None,
@@ -116,7 +118,7 @@ def study(
 ) -> None:
     """Run a study sweep and write report.html, results.csv/.parquet and summary.json.
 
-    With --target-width-m, --target-relative or --budget-frames (range-limit, webcam-vs-dslr)
+    With --target-width-m, --target-relative, --budget-frames or --unit-budget-frames (range-limit, webcam-vs-dslr)
     its ranges are the start of a sequential design that adds frames where the range limits
     are undecided (design.json). With --uncertainty N (every study but replication) it also runs at
     N points of the unknowns and states its answers' noise + physics intervals beside the noise ones."""
@@ -135,7 +137,12 @@ def study(
         physics_source=source or None,
     )
     options.validate()
-    settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
+    settings = {
+        "target_width_m": target_width_m,
+        "target_relative": target_relative,
+        "budget_frames": budget_frames,
+        "unit_budget_frames": unit_budget_frames,
+    }
     design = _design(name, quick, settings, options)
     execution = _execution(workers, scheduler)
     prepare_out_dir(out, part=name)
@@ -201,16 +208,23 @@ def main_job(
     target_width_m: opt.TargetWidthM = None,
     target_relative: opt.TargetRelative = None,
     budget_frames: opt.BudgetFrames = None,
+    unit_budget_frames: opt.UnitBudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
     physics_from: opt.PhysicsFrom = "calibration",
     workers: opt.Workers = None,
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults; range-limit places
-    its frames by its sequential design (--target-width-m, --target-relative, --budget-frames)
+    its frames by its sequential design (--target-width-m, --target-relative, --budget-frames,
+    --unit-budget-frames)
     and, with --uncertainty N, every study also runs at N points of the unknowns and states its
     answers' noise + physics intervals (far limits, colour separability, the LED setting's P)."""
     physics, source = _physics(uncertainty, physics_from, MAIN_JOB)
-    settings = {"target_width_m": target_width_m, "target_relative": target_relative, "budget_frames": budget_frames}
+    settings = {
+        "target_width_m": target_width_m,
+        "target_relative": target_relative,
+        "budget_frames": budget_frames,
+        "unit_budget_frames": unit_budget_frames,
+    }
     designs = {
         n: _checked(SEQUENTIAL[n].default_design(True).with_overrides(**settings), SEQUENTIAL[n].default_options(True))
         for n in MAIN_JOB_DESIGNS

@@ -39,9 +39,13 @@ not go nearer than the grid's nearest range).
    round and the unit), where the interval is to be narrowed.
 
 The round's ``round_frames`` slots are shared between the unit's undecided limits in
-proportion to their intervals' width over the width the target allows. When a round
-asks for more frames than the budget has left, each undecided unit gets an equal share
-of what is left, its picks in the order above; a unit whose share is below one slot stops.
+proportion to their intervals' width over the width the target allows. A unit stops at
+its own budget (``unit_budget_frames``, when given): a limit that sits where P is flat at
+about 0.95 cannot be decided by any number of frames, and without a cap it takes the
+study's budget from the others (a T6 series of ``webcam-vs-dslr`` took 3 472 of 7 680
+frames and stayed undecided). When a round asks for more frames than the budget has left,
+each undecided unit gets an equal share of what is left, its picks in the order above; a
+unit whose share is below one slot stops.
 
 **Stored and resumable.** Every frame is an ordinary frame task
 (:func:`studies.engine.tasks.frame_task`, noise seed index the next unused one at its
@@ -113,6 +117,8 @@ class SequentialDesign:
     target_relative : ... or when both ends lie within ± this fraction of the limit (0.2: ±20 %).
     budget_frames : frames the design may spend in all (coarse grid included); default
         :data:`DEFAULT_BUDGET_PER_UNIT` per unit.
+    unit_budget_frames : frames one unit may spend (its coarse grid included); None: only
+        the design's budget bounds it.
     round_frames : slots each undecided unit adds per round.
     refine : the candidate ranges are the coarse grid's smallest step divided by this.
     max_range_m : farthest range the design may extend to when the farthest range tried
@@ -125,6 +131,7 @@ class SequentialDesign:
     target_width_m: float | None = None
     target_relative: float | None = None
     budget_frames: int | None = None
+    unit_budget_frames: int | None = None
     round_frames: int = DEFAULT_ROUND_FRAMES
     refine: int = 2
     max_range_m: float | None = None
@@ -142,6 +149,9 @@ class SequentialDesign:
             raise ValueError(f"target_relative: expected a fraction in (0, 1), got {self.target_relative!r}")
         if self.budget_frames is not None and not (isinstance(self.budget_frames, int) and self.budget_frames >= 1):
             raise ValueError(f"budget_frames: expected an integer >= 1, got {self.budget_frames!r}")
+        unit = self.unit_budget_frames
+        if unit is not None and not (isinstance(unit, int) and not isinstance(unit, bool) and unit >= 1):
+            raise ValueError(f"unit_budget_frames: expected an integer >= 1, got {unit!r}")
         if not isinstance(self.round_frames, int) or self.round_frames < 2:
             raise ValueError(f"round_frames: expected an integer >= 2, got {self.round_frames!r}")
         if not isinstance(self.refine, int) or not 1 <= self.refine <= 16:
@@ -343,7 +353,7 @@ def next_ranges(
 class UnitOutcome:
     """How a unit's design ended: its frames (slots × base conditions), rounds, frames per
     range, the final status of each limit and why it stopped (``decided``, ``budget``,
-    ``rounds``)."""
+    ``unit budget``, ``rounds``)."""
 
     key: tuple
     frames: int
@@ -403,7 +413,9 @@ def decision_text(rec: Mapping, outcome: Mapping | None) -> str:
         return f"{n} frames (placed for the best tracker)"
     if outcome["far_decided"]:
         return f"{n} frames: decided ({outcome['far_how']})"
-    why = {"budget": "budget spent", "rounds": "rounds spent"}.get(outcome["stop"], outcome["stop"])
+    why = {"budget": "budget spent", "unit budget": "its unit's budget spent", "rounds": "rounds spent"}.get(
+        outcome["stop"], outcome["stop"]
+    )
     return f"{n} frames: not decided ({why}; {outcome['far_how']})"
 
 
@@ -476,6 +488,12 @@ def run_design(
     budget = design.budget_frames or DEFAULT_BUDGET_PER_UNIT * len(units)
     if budget < coarse_frames:
         raise ValueError(f"budget_frames: expected at least the coarse grid's {coarse_frames} frames, got {budget}")
+    unit_coarse = max(len(b) for b in units.values()) * len(coarse) * options.seeds
+    if design.unit_budget_frames is not None and design.unit_budget_frames < unit_coarse:
+        raise ValueError(
+            f"unit_budget_frames: expected at least a unit's coarse grid of {unit_coarse} frames, "
+            f"got {design.unit_budget_frames}"
+        )
     run = frames or run_frames
     counts: dict[tuple, dict[float, int]] = {k: {} for k in units}
     fitted: dict[tuple, list[dict]] = {k: [] for k in units}
@@ -509,6 +527,13 @@ def run_design(
             if key in stop:
                 continue
             picks = next_ranges(records[key], design, candidates, coarse, options.seeds, round_index + 1, key)
+            if picks and design.unit_budget_frames is not None:  # what the unit's own budget leaves
+                spent_by_unit = sum(counts[key].values()) * len(units[key])
+                left_slots = (design.unit_budget_frames - spent_by_unit) // len(units[key])
+                if left_slots < 1:
+                    stop[key] = "unit budget"
+                    continue
+                picks = picks[:left_slots]
             if picks:
                 todo[key] = picks
             else:

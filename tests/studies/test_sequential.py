@@ -12,6 +12,7 @@ import hashlib
 import json
 import math
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +129,7 @@ def test_candidate_ranges_refine_the_coarse_grid_and_reach_the_stated_maximum():
         ("target_width_m", 0.0),
         ("target_relative", 1.5),
         ("budget_frames", 0),
+        ("unit_budget_frames", 0),
         ("round_frames", 1),
         ("refine", 0),
         ("max_range_m", -3.0),
@@ -250,6 +252,40 @@ def test_the_budget_bounds_the_frames():
     assert sum(unit.frames_per_range.values()) == unit.frames
     text = decision_text({"frames": unit.frames, "tracker": "best"}, unit.to_dict())
     assert text.startswith(f"{unit.frames} frames: not decided (budget spent; interval ")
+
+
+def _flat_at_095(tasks, out, execution, description=""):
+    """Yaw 0: the logistic fake; yaw 30°: P = 0.95 at every range, a far limit no number of
+    frames decides (the fit's interval stays across the whole grid)."""
+    rows = []
+    for t in tasks:
+        row = fake_row(t)
+        if t["nominal"]["yaw_deg"] == 30.0:
+            digest = hashlib.sha256(json.dumps([t, "flat"], sort_keys=True).encode()).digest()
+            ok = int.from_bytes(digest[:8], "little") / 2.0**64 < 0.95
+            row.update(detected=ok, side_correct=ok, numbering_correct=ok)
+        rows.append(row)
+    return rows
+
+
+def test_a_unit_budget_stops_an_undecidable_limit_and_leaves_the_others_alone():
+    options = OPTIONS.with_overrides(yaws_deg=(0.0, 30.0))
+    free = run_design("fake", options, WIDTH_1M, SCRATCH, UNIT, frames=_flat_at_095)
+    capped = run_design("fake", options, replace(WIDTH_1M, unit_budget_frames=300), SCRATCH, UNIT, frames=_flat_at_095)
+    easy_free, flat_free = free.units
+    easy, flat = capped.units
+    assert flat_free.frames > 300 and not flat_free.far_decided  # uncapped, it takes what the budget leaves
+    assert flat.frames <= 300 and flat.stop == "unit budget" and not flat.far_decided
+    assert easy == easy_free and easy.far_decided  # the other unit's rounds do not depend on it
+    assert capped.frames == easy.frames + flat.frames < free.frames
+    text = decision_text({"frames": flat.frames, "tracker": "best"}, flat.to_dict())
+    assert text.startswith(f"{flat.frames} frames: not decided (its unit's budget spent; ")
+
+
+def test_a_unit_budget_below_a_units_coarse_grid_is_refused():
+    with pytest.raises(ValueError, match=r"^unit_budget_frames: expected at least a unit's coarse grid of 18 frames"):
+        design = SequentialDesign(unit_budget_frames=12)
+        run_design("fake", OPTIONS, design, SCRATCH, UNIT, frames=in_memory())
 
 
 def test_frames_are_stored_tasks_and_a_cut_run_resumes_to_the_same_answer(tmp_path):
