@@ -25,6 +25,33 @@ from scenes.hardware import HardwareFile, hardware_source
 from scenes.sourced import DataFileError, Fields, loads_sourced
 from scenes.view import CAMERA_DATA_DIR, CameraGeometry, geometry_from_fields
 
+__all__ = [
+    "BODY_DIR",
+    "COLOUR_MATRICES",
+    "DERIVED_OVERRIDES",
+    "DISTORTION_TERMS",
+    "HIGHLIGHT_MODES",
+    "NOISE_REDUCTION_METHODS",
+    "NR_KEYS",
+    "OUTPUTS",
+    "RELATIVE_ILLUMINATION_MODELS",
+    "TONE_CURVES",
+    "Camera",
+    "ExposureModel",
+    "ISPModel",
+    "LensModel",
+    "SensorModel",
+    "VignettingEntry",
+    "builtin_ssf_names",
+    "camera_template",
+    "camera_to_xyz_from_ssf",
+    "load_camera",
+    "load_ssf_qe",
+    "ssf_qe",
+    "with_overrides",
+    "with_ssf",
+]
+
 BODY_DIR = CAMERA_DATA_DIR / "bodies"
 SSF_DIR = CAMERA_DATA_DIR / "ssf"
 

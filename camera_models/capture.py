@@ -37,6 +37,17 @@ from camera_models.sensor_paths import expose
 from scenes.radiance import SpectralRadiance
 from scenes.view import project
 
+__all__ = [
+    "Capture",
+    "background_electrons_per_s",
+    "capture",
+    "frame_meter",
+    "full_frame_mosaic",
+    "marker_core_saturation",
+    "marker_pixels",
+    "noiseless_raw",
+]
+
 
 @dataclass(frozen=True)
 class Capture:

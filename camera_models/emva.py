@@ -31,6 +31,8 @@ from camera_models.sensor import SensorSettings, cfa_channels, emva_saturation_e
 from camera_models.sensor_paths import expose
 from scenes import spectra
 
+__all__ = ["EmvaSetup", "exposure_fractions", "green_qe", "true_parameters", "write_dataset"]
+
 
 @dataclass(frozen=True)
 class EmvaSetup:

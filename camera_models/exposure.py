@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 from camera_models.camera import Camera
 
+__all__ = ["ExposureSettings", "auto_exposure", "check_exposure_s", "manual_exposure"]
+
 
 @dataclass(frozen=True)
 class ExposureSettings:

@@ -35,6 +35,24 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+__all__ = [
+    "GlareSpread",
+    "OpticsEffects",
+    "apply_crosstalk",
+    "apply_glare",
+    "convolve_full",
+    "crop_centre",
+    "crosstalk_kernel",
+    "defocus_blur_diameter_m",
+    "glare_kernel",
+    "pillbox_kernel",
+    "tail_density_px",
+    "tail_encircled",
+    "tail_fraction_beyond",
+    "tail_kernel",
+    "tail_profile",
+]
+
 # -- veiling glare ------------------------------------------------------------------------------------------------
 
 

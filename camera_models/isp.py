@@ -64,6 +64,32 @@ from camera_models.camera import HIGHLIGHT_MODES, NOISE_REDUCTION_METHODS, OUTPU
 from camera_models.sensor import cfa_channels
 from scenes import spectra
 
+__all__ = [
+    "FILE_SUFFIXES",
+    "NLMEANS_SEARCH_PX",
+    "NLMEANS_TEMPLATE_PX",
+    "PNG_COMPRESSION",
+    "ProcessedImage",
+    "auto_white_balance_gains",
+    "blend_highlights",
+    "camera_to_srgb_matrix",
+    "check_isp_options",
+    "daylight_gains",
+    "demosaic",
+    "encode_8bit",
+    "encode_jpeg",
+    "encode_jpeg_bgr",
+    "encode_png_bgr",
+    "noise_reduction_strength",
+    "process",
+    "reduce_noise",
+    "saved_image",
+    "srgb_encode_8bit",
+    "tone_curve",
+    "unsharp_mask",
+    "white_balance_gains",
+]
+
 SUBSAMPLING_FLAGS = {
     "4:4:4": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444,
     "4:2:2": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422,

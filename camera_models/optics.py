@@ -50,6 +50,23 @@ from camera_models.sensor import cfa_channels
 from scenes import spectra
 from scenes.radiance import PixelGrid, SpectralRadiance
 
+__all__ = [
+    "C_LIGHT_M_S",
+    "H_PLANCK_J_S",
+    "OpticalImage",
+    "RadialMapping",
+    "airy_intensity",
+    "camera_equation_factor_m2_sr",
+    "check_f_number",
+    "distortion_resample",
+    "electrons_per_joule",
+    "optical_image",
+    "photons_per_joule",
+    "psf_kernel",
+    "relative_illumination",
+    "turned_grid",
+]
+
 H_PLANCK_J_S = 6.62607015e-34
 """Planck constant, J·s (SI 2019, exact)."""
 C_LIGHT_M_S = 299792458.0

@@ -23,6 +23,8 @@ from numpy.typing import NDArray
 from camera_models.camera import Camera
 from camera_models.optics import RadialMapping
 
+__all__ = ["OpenCVDistortion", "opencv_distortion"]
+
 
 @dataclass(frozen=True)
 class OpenCVDistortion:

@@ -34,6 +34,18 @@ from scipy import special
 
 from camera_models.camera import SensorModel
 
+__all__ = [
+    "SensorModel",
+    "SensorSettings",
+    "bloom",
+    "bloom_in_place",
+    "cfa_channels",
+    "clipped_normal_variance",
+    "emva_saturation_e",
+    "expose_numpy",
+    "mosaic",
+]
+
 CFA_CHANNEL = {"R": 0, "G": 1, "B": 2}
 
 

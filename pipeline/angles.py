@@ -33,6 +33,19 @@ from numpy.typing import NDArray
 from pipeline.frames import CS_FROM_CV
 from scenes.view import CameraGeometry
 
+__all__ = [
+    "Intrinsics",
+    "cv_to_study",
+    "full_pixel",
+    "intrinsics_from_values",
+    "pinhole_angles",
+    "pinhole_rays_cv",
+    "resize_scales",
+    "resized_pixel",
+    "study_angles",
+    "study_unit_vectors",
+]
+
 
 @dataclass(frozen=True)
 class Intrinsics:

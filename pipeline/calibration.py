@@ -31,6 +31,34 @@ from numpy.typing import NDArray
 from pipeline.angles import Intrinsics
 from pipeline.image_io import as_bgr, load_image, to_uint8
 
+__all__ = [
+    "ASPECT_WARN",
+    "CV_MODELS",
+    "DIST_COEFF_COUNTS",
+    "DUPLICATE_MIN_PX",
+    "DUPLICATE_REL",
+    "MIN_ORIENTATIONS",
+    "MIN_ORIENTATION_DEG",
+    "PATTERN_INNER_CORNERS",
+    "PRINCIPAL_POINT_WARN",
+    "SQUARE_M",
+    "Calibration",
+    "board_normals",
+    "board_points_m",
+    "calibrate",
+    "calibrate_points",
+    "calibration_warnings",
+    "check_dist_coeffs",
+    "check_pattern",
+    "corner_set_difference_px",
+    "distort_points",
+    "find_corners",
+    "load_calibration",
+    "new_camera_matrix",
+    "orientation_groups",
+    "undistort",
+]
+
 PATTERN_INNER_CORNERS = (8, 6)
 """Inner corners per row and per column of the study's board (6 × 8)."""
 

@@ -46,6 +46,16 @@ from pipeline.tracker import TrackerSettings, track
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.led import SIDE_COLOURS
 
+__all__ = [
+    "ESTIMATORS",
+    "REAL_PHOTO_FALSE_POSITIVES",
+    "TRACKERS",
+    "Detection",
+    "FalsePositiveCheck",
+    "check_resize",
+    "detect",
+]
+
 
 @dataclass
 class Detection:

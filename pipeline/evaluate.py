@@ -14,6 +14,8 @@ import numpy as np
 from pipeline.angles import Intrinsics
 from pipeline.detect import detect
 
+__all__ = ["evaluate_detection"]
+
 
 def _truth_markers(truth: dict) -> np.ndarray:
     raw = truth.get("markers_px", truth.get("markers_ground_truth_px"))

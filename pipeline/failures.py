@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from enum import StrEnum
 
+__all__ = ["Failure"]
+
 
 class Failure(StrEnum):
     """Failure codes of the detection pipeline, in the order the stages run."""

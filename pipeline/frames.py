@@ -36,6 +36,24 @@ from scipy.spatial.transform import Rotation
 from pipeline.messages import GlobalPos
 from scenes.beacon import target_to_beacon
 
+__all__ = [
+    "B_FROM_CV",
+    "CS_FROM_CV",
+    "FRD_FROM_FLU",
+    "F_FROM_T",
+    "RING_RADIUS_M",
+    "S_FROM_T",
+    "Pose",
+    "beacon_from_target",
+    "cv_from_robot",
+    "euler_zyx",
+    "global_pose",
+    "homogeneous",
+    "invert",
+    "pose_from_scenario",
+    "ring_angle_rad",
+]
+
 CS_FROM_CV = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 """Study camera frame (X back, Y right, Z up) from the OpenCV camera frame."""
 

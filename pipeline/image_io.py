@@ -21,6 +21,8 @@ from numpy.typing import NDArray
 
 from pipeline.image_header import header_size
 
+__all__ = ["MAX_PIXELS", "as_bgr", "check_size", "load_image", "to_float", "to_uint8"]
+
 RAW_SUFFIXES = {".cr2", ".cr3", ".crw", ".nef", ".arw", ".dng", ".raf", ".orf", ".rw2", ".pef"}
 MAX_PIXELS = 200_000_000
 """Images larger than this are refused (memory), px: 2e8 px is the largest sensors made

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = ["STUDY_START_MM", "TriadSolution", "geometric_start", "solve_triads", "study_start"]
+
 STUDY_START_MM = (100.0, 500.0, 1000.0)
 """The study's Newton start (R1, R2, R3), mm."""
 

@@ -26,6 +26,8 @@ from numpy.typing import NDArray
 
 from pipeline.failures import Failure
 
+__all__ = ["Blob", "TrackResult", "cross_candidates", "cross_candidates_many", "number_study"]
+
 
 @dataclass
 class Blob:

@@ -24,6 +24,8 @@ from typing import Any, ClassVar
 
 from scenes.led import SIDE_COLOURS
 
+__all__ = ["BotPositionQuat", "GlobalPos", "LEDPoints"]
+
 
 def _finite(name: str, value: Any) -> float:
     try:

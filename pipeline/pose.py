@@ -27,6 +27,8 @@ from pipeline.pnp import solve_pnp
 from pipeline.thesis_pose import thesis_pose_from_vectors
 from scenes.beacon import BeaconDesign
 
+__all__ = ["PoseEstimate", "pnp_pose", "quest_pose"]
+
 _LM_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
 
 

@@ -44,6 +44,24 @@ from pipeline.messages import BotPositionQuat, LEDPoints
 from pipeline.quest import attitude_matrix, quest, quest_shortcut
 from scenes.beacon import BeaconDesign
 
+__all__ = [
+    "EQUAL_WEIGHTS",
+    "HORIZONTAL",
+    "QUEST_WEIGHTS",
+    "STUDY_WEIGHTS",
+    "VERTICAL",
+    "ThesisPoseResult",
+    "ThesisRanges",
+    "attitude_and_pose",
+    "measured_vectors",
+    "pose_from_study",
+    "reference_vectors_s",
+    "thesis_pose",
+    "thesis_pose_from_vectors",
+    "thesis_ranges",
+    "triad_distances_mm",
+]
+
 STUDY_WEIGHTS = (0.05, 0.05, 0.45, 0.45)
 """QUEST weights for w2..w5 after the study's tuning (docs/source-study.md §7)."""
 EQUAL_WEIGHTS = (0.25, 0.25, 0.25, 0.25)

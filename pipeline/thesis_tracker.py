@@ -46,6 +46,26 @@ from pipeline.image_io import as_bgr, to_uint8
 from pipeline.markers import Blob, TrackResult, number_study
 from scenes.led import SIDE_COLOURS
 
+__all__ = [
+    "CLOSE_KERNEL",
+    "ERODE_KERNEL",
+    "MAX_GROUPS",
+    "STUDY_HSV_RANGES",
+    "WINDOW_OVERHEAD_PX",
+    "HsvBox",
+    "ThesisTrackerSettings",
+    "close_reach",
+    "colour_mask",
+    "derive_hsv_ranges",
+    "in_range_mask",
+    "mask_windows",
+    "morphology_reach",
+    "processed_hsv",
+    "survivor_size",
+    "thesis_track",
+    "windowed_morphology",
+]
+
 HsvBox = tuple[tuple[int, int, int], tuple[int, int, int]]
 
 STUDY_HSV_RANGES: dict[str, list[HsvBox]] = {

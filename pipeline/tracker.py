@@ -53,6 +53,23 @@ from pipeline.pnp import solve_pnp
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.led import SIDE_COLOURS
 
+__all__ = [
+    "DEFAULT_CHROMA",
+    "NOISE_SUBSAMPLE_PX",
+    "NOISE_TILE_PX",
+    "ColourModel",
+    "TrackerSettings",
+    "best_five",
+    "calibrate_colours",
+    "cross_dimensions",
+    "find_blobs",
+    "noise_threshold",
+    "rms_lower_bounds",
+    "srgb_to_linear",
+    "subsample_step",
+    "track",
+]
+
 DEFAULT_CHROMA = {
     "red": (1.0, 0.0),
     "green": (0.0, 1.0),

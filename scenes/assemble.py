@@ -30,6 +30,25 @@ from scenes.scenario import Scenario, ScenarioError
 from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
 from scenes.view import project
 
+__all__ = [
+    "FACE_STANDOFF_M",
+    "CropBox",
+    "bare_face_emitter",
+    "beacon_shapes",
+    "ceiling_radiance_W_m2_sr",
+    "crop_box",
+    "emitter_groups",
+    "environment_shapes",
+    "face_emitter",
+    "leak_emitter",
+    "room_extent",
+    "room_spec",
+    "scene_spec",
+    "sensor_spec",
+    "target_shapes",
+    "to_mitsuba",
+]
+
 FACE_STANDOFF_M = 2e-4
 """A housing's front plate sits 0.2 mm behind its lit face so the two never coincide; the
 lit face itself is exactly at the marker position."""

@@ -28,6 +28,18 @@ from scenes.hardware import HardwareFile, hardware_names, hardware_source
 from scenes.led import LED, SIDE_COLOURS, led_for_side, led_part
 from scenes.sourced import DataFileError, Fields, loads_sourced
 
+__all__ = [
+    "HOUSING_FINISHES",
+    "SIDE_ANGLE_RAD",
+    "BeaconDesign",
+    "Marker",
+    "beacon_design",
+    "beacon_names",
+    "beacon_template",
+    "load_beacons",
+    "target_to_beacon",
+]
+
 HOUSING_FINISHES = ("white", "black")
 
 SIDE_ANGLE_RAD = {"blue": 0.0, "green": math.pi / 2, "red": math.pi, "yellow": 3 * math.pi / 2}

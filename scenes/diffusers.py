@@ -35,6 +35,22 @@ from scenes import spectra
 from scenes.led import SIDE_COLOURS
 from scenes.sourced import DATA_DIR, load_sourced
 
+__all__ = [
+    "MAX_PAPER_SHEETS",
+    "DiffuserConfig",
+    "Foam",
+    "Paper",
+    "adding",
+    "colour_module_patch",
+    "default_foam",
+    "foam_optical_depth_from_transmittance",
+    "foam_transmittance_diffusion",
+    "km_invert",
+    "km_layer",
+    "paper",
+    "stack",
+]
+
 PAPER_COLOURS = ("white", "matched", *SIDE_COLOURS)
 MAX_PAPER_SHEETS = 5
 

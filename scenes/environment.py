@@ -19,6 +19,8 @@ import numpy as np
 from scenes import spectra
 from scenes.sourced import DATA_DIR, load_sourced
 
+__all__ = ["ENVIRONMENT_NAMES", "Environment", "environment", "load_environments"]
+
 ENVIRONMENT_NAMES = ("dark", "dark-room", "lit-room")
 
 

@@ -24,6 +24,8 @@ from scenes.render import render
 from scenes.scenario import Scenario
 from scenes.view import project
 
+__all__ = ["marker_figures", "side_to_centre_flux"]
+
 
 def marker_figures(scenario: Scenario, radiance: SpectralRadiance | None = None) -> list[dict]:
     """Figures for markers 1-5 of the visible side (see module docstring)."""

@@ -27,6 +27,18 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+__all__ = [
+    "ENV_OVERRIDE",
+    "ENV_THREADS",
+    "MIN_LLVM_MAJOR",
+    "VariantChoice",
+    "active_variant",
+    "choose_backend",
+    "find_libllvm",
+    "llvm_major_version",
+    "select_variant",
+]
+
 log = logging.getLogger("beacon_sim")
 
 MIN_LLVM_MAJOR = 16

@@ -47,6 +47,21 @@ from scenes.mitsuba_variant import select_variant
 from scenes.render_cache import RenderCache, content_key
 from scenes.shapes import disk_shape
 
+__all__ = [
+    "CLEARANCE_M",
+    "LED_BODY_REFLECTANCE",
+    "LED_DEPTH_M",
+    "STATS",
+    "MarkerEmission",
+    "NearFieldSettings",
+    "NearFieldStats",
+    "exit_spectral_factor",
+    "housing_leak",
+    "marker_emission",
+    "marker_objects",
+    "near_field_spec",
+]
+
 log = logging.getLogger("beacon_sim")
 
 NEAR_FIELD_VERSION = 3

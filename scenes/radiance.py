@@ -22,6 +22,8 @@ from numpy.typing import NDArray
 
 from scenes import spectra
 
+__all__ = ["PixelGrid", "RadianceComponent", "SpectralRadiance"]
+
 
 @dataclass(frozen=True)
 class PixelGrid:

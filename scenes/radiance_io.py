@@ -22,6 +22,8 @@ import OpenEXR
 from scenes import spectra
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 
+__all__ = ["read_radiance_exr", "srgb_preview", "write_band_cube_exr", "write_preview_png", "write_radiance_exr"]
+
 
 def _channel(name: str) -> str:
     return name.replace(":", "_")

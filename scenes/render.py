@@ -44,6 +44,20 @@ from scenes.scenario import Scenario
 if TYPE_CHECKING:
     import mitsuba as mi
 
+__all__ = [
+    "DIRECT_VERSION",
+    "NEGLIGIBLE_UNIT_RADIANCE",
+    "RENDER_VERSION",
+    "pixel_grid",
+    "render",
+    "render_key",
+    "render_unit_groups",
+    "side_current_mA",
+    "uses_primary_rays",
+    "with_emission",
+    "with_led_current",
+]
+
 log = logging.getLogger("beacon_sim")
 
 RENDER_VERSION = 1

@@ -35,6 +35,16 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = [
+    "ENV_CACHE_DIR",
+    "FORMAT_VERSION",
+    "CacheStats",
+    "RenderCache",
+    "atomic_write_bytes",
+    "content_key",
+    "default_cache_dir",
+]
+
 ENV_CACHE_DIR = "BEACON_SIM_CACHE"
 
 FORMAT_VERSION = 2

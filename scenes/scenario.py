@@ -33,6 +33,8 @@ from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
 from scenes.view import CameraGeometry, CameraPose, camera_geometry
 
+__all__ = ["MAX_RANGE_M", "RenderSettings", "Scenario", "ScenarioError"]
+
 MAX_RANGE_M = 10_000.0
 """Longest camera-to-beacon range a scenario accepts, m: at 10 km a beacon under a metre
 across subtends less than 0.1 mrad, under one pixel of any camera modelled (and ranges

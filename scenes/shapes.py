@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["beam_shape", "box_shape", "cylinder_shape", "disk_shape", "frame_with_z", "rect_shape", "to_world_matrix"]
+
 
 def frame_with_z(z_axis: np.ndarray) -> np.ndarray:
     """A rotation matrix whose third column is ``z_axis``."""

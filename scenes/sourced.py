@@ -16,7 +16,17 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DATA_DIR", "DataFileError", "Fields", "load_sourced", "load_tables", "loads_sourced"]
+__all__ = [
+    "DATA_DIR",
+    "MAX_NESTING",
+    "DataFileError",
+    "Fields",
+    "check_dotted_keys",
+    "dotted_key_parts",
+    "load_sourced",
+    "load_tables",
+    "loads_sourced",
+]
 
 VALUE_KEYS = ("value", "source", "assumed")
 """The keys of a number's inline table: the value and one of the two provenance notes."""

@@ -19,6 +19,23 @@ import colour
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = [
+    "BAND_CENTRES_NM",
+    "BAND_EDGES_NM",
+    "K_M_LM_PER_W",
+    "WAVELENGTHS_NM",
+    "band_average",
+    "cie1931_cmfs",
+    "dominant_wavelength_nm",
+    "illuminant_shape",
+    "integrate_nm",
+    "led_shape",
+    "luminous_efficacy_lm_per_W",
+    "normalise_shape",
+    "peak_for_dominant_nm",
+    "photopic_luminosity",
+]
+
 WAVELENGTHS_NM: NDArray[np.float64] = np.arange(380.0, 720.0 + 0.5, 1.0)
 """Spectral sample grid, nm (1 nm steps)."""
 

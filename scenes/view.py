@@ -22,6 +22,19 @@ from numpy.typing import NDArray
 from scenes.hardware import PACKAGE_DIRS, HardwareFile, hardware_names, hardware_source
 from scenes.sourced import DataFileError, Fields, loads_sourced
 
+__all__ = [
+    "CAMERA_DATA_DIR",
+    "MAX_PIXELS",
+    "MAX_SIDE_PX",
+    "MIN_PIXEL_PITCH_UM",
+    "CameraGeometry",
+    "CameraPose",
+    "camera_geometry",
+    "camera_names",
+    "geometry_from_fields",
+    "project",
+]
+
 CAMERA_DATA_DIR = PACKAGE_DIRS["camera"]
 """The camera files: one TOML per camera + lens (the camera models read the rest of each)."""
 

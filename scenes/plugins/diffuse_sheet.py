@@ -9,6 +9,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+__all__ = ["diffuse_sheet_class"]
+
 
 def diffuse_sheet_class():
     """Build the sheet BSDF class against the active variant's ``mi.BSDF``."""

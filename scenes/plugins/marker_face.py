@@ -23,6 +23,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+__all__ = ["marker_face_class"]
+
 
 def marker_face_class():
     """Build the emitter class against the active variant's ``mi.Emitter``."""

@@ -37,6 +37,20 @@ from studies.engine.sweep import Execution, Screening, sweep_screened
 from studies.engine.tasks import StudyOptions, grid_conditions
 from studies.engine.uncertainty import nominal_rows, physics_interval, physics_note, point_rows
 
+__all__ = [
+    "NAME",
+    "SETTING",
+    "add_physics",
+    "configuration_table",
+    "default_options",
+    "diffuser_text",
+    "recommend",
+    "recommendation_text",
+    "run",
+    "setting_of",
+    "write_outputs",
+]
+
 NAME = "brightness-diffuser"
 FULL_DIFFUSERS = tuple(
     (foam, n, colour)

@@ -34,6 +34,28 @@ from studies.engine.report import FIGURE_DPI, Provenance, Report, page_context, 
 from studies.engine.sequential import design_evidence
 from studies.engine.strict_json import strict_json
 
+__all__ = [
+    "ANSWER_LABELS",
+    "BY_RANGE",
+    "BY_SEPARABILITY",
+    "CHOSEN",
+    "FIGURE_NAME",
+    "NONE",
+    "RULE",
+    "STUDY_TITLES",
+    "TIE",
+    "YAW_STYLES",
+    "Decision",
+    "FarLimit",
+    "answers",
+    "decide",
+    "decision_yaw",
+    "far_limit_figure",
+    "far_limit_png",
+    "range_limit_diffusers",
+    "write_index",
+]
+
 STUDY_TITLES = {
     range_limit.NAME: "how far, versus yaw (working range per camera)",
     brightness_diffuser.NAME: "which LED drive and diffuser (operating window)",

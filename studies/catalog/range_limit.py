@@ -45,6 +45,21 @@ from studies.engine.uncertainty import (
     point_rows,
 )
 
+__all__ = [
+    "ANSWER_LABELS",
+    "DECISION_LABEL",
+    "GROUP",
+    "NAME",
+    "PHYSICS_LABEL",
+    "UNIT_FIELDS",
+    "analyse",
+    "default_design",
+    "default_options",
+    "lead_lines",
+    "run",
+    "write_outputs",
+]
+
 NAME = "range-limit"
 PLANNED_RANGE_M = 10.0
 GROUP = ["camera", "beacon", "side", "led_current_mA", "nominal_yaw_deg", "tracker"]

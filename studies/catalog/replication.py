@@ -31,6 +31,19 @@ from studies.engine.sweep import Execution, sweep_in_chunks
 from studies.engine.tables import detection_curve
 from studies.engine.tasks import StudyOptions, grid_conditions
 
+__all__ = [
+    "DRIVES_MA",
+    "MAX_RANGE_BY",
+    "NAME",
+    "chunks",
+    "conditions",
+    "configuration_table",
+    "default_options",
+    "group_max_range",
+    "max_range_table",
+    "run",
+]
+
 NAME = "replication"
 DRIVES_MA = tuple(float(f"{c:.3g}") for c in np.geomspace(0.5, 20.0, 8))
 """Eight LED drive levels, log-spaced from a deep dimming (0.5 mA) to the datasheet 20 mA."""

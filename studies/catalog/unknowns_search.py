@@ -53,6 +53,27 @@ from studies.engine.sweep import Execution, run_frames
 from studies.engine.tasks import StudyOptions, frame_tasks
 from studies.engine.unknowns import Unknown, apply, fixed, load_unknowns, sample
 
+__all__ = [
+    "BUILT",
+    "CONDITIONS",
+    "HELD",
+    "MIN_POINTS_TO_JUDGE",
+    "REFERENCE_SEARCH",
+    "TUNING",
+    "TUNING_WEBCAM",
+    "WEBCAMS",
+    "apply_point",
+    "calibrated_set",
+    "drive_name",
+    "registry_for",
+    "relevant",
+    "run",
+    "search_space",
+    "summarise",
+    "task_values",
+    "tasks",
+]
+
 WEBCAMS = ("logitech-c270", "spedal-920")
 CONDITIONS: dict[str, dict] = {
     "webcam-150mm": {

@@ -59,6 +59,21 @@ from studies.engine.tables import write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks
 from studies.engine.unknowns import apply, load_unknowns
 
+__all__ = [
+    "FOCUS",
+    "PRIMARY_TESTS",
+    "WEIGHT_VARIANTS",
+    "conclusions",
+    "default_points",
+    "derive_thresholds",
+    "overlapping_colours",
+    "run",
+    "session_settings",
+    "test_conditions",
+    "v1_vs_v2",
+    "validation_table",
+]
+
 NAME = "validate"
 AS_BUILT = {"foam": True, "paper_sheets": 1, "paper_colour": "matched", "led_current_mA": 20.0}
 

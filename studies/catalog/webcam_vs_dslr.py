@@ -54,6 +54,26 @@ from studies.engine.uncertainty import (
     values_at_points,
 )
 
+__all__ = [
+    "CAMERA_STYLES",
+    "DRIVES_MA",
+    "NAME",
+    "RANGE_LABELS",
+    "UNIT_FIELDS",
+    "analyse",
+    "colour_separability",
+    "confusions",
+    "default_design",
+    "default_options",
+    "lead_lines",
+    "mosaic_png",
+    "run",
+    "separability_interval_text",
+    "separability_text",
+    "small_probability",
+    "write_outputs",
+]
+
 NAME = "webcam-vs-dslr"
 ALL_CAMERAS = ("logitech-c270", "spedal-920", "canon-t6-18mm", "canon-t6-10mm")
 MOSAIC_RANGES_M = (2.0, 5.0, 7.0)

@@ -2,4 +2,6 @@
 
 from studies.cli.app import main
 
+__all__ = []
+
 main()

@@ -38,6 +38,19 @@ from studies.cli.common import console
 from studies.cli.out_folder import folder_command, release_out_dirs
 from studies.engine.runner import DISK_FULL, NoWorkersError, RunStopped
 
+__all__ = [
+    "COMMAND_MODULES",
+    "EXIT_INTERRUPTED",
+    "EXIT_STOPPED",
+    "InterruptGuard",
+    "app",
+    "app_command_names",
+    "click_command",
+    "main",
+    "usage_message",
+    "version_text",
+]
+
 COMMAND_MODULES = (hardware, scene, camera, pipeline, study, experiments, robot, checks, unknowns)
 """Where the commands are defined, in the order ``--help`` lists them."""
 

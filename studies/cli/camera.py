@@ -30,6 +30,8 @@ from studies.cli.out_folder import prepare_out_dir
 from studies.engine import strict_json
 from studies.engine.scoring import CLIPPED_CORES
 
+__all__ = ["COMMANDS", "WORKING_SETTING", "capture", "capture_warnings", "emva1288", "ring"]
+
 
 def _gain(cam, iso: float | None, gain: int | None) -> float:
     """The analog gain of ``--iso`` (ISO bodies) or ``--gain`` (UVC gain code), refusing the

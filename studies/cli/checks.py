@@ -18,6 +18,8 @@ from studies.cli.common import UsageError, check_finite, console
 from studies.engine import strict_json
 from studies.experiments import estimator_montecarlo, lens_calibration, two_stage_check
 
+__all__ = ["COMMANDS", "estimator_montecarlo_command", "lens_calibration_command", "two_stage_check_command"]
+
 
 def two_stage_check_command(
     view_deg: Annotated[float, typer.Option("--view-deg", help="Viewing angle off the marker's axis, degrees.")] = 10.0,

@@ -23,6 +23,27 @@ from scenes.render_cache import ENV_CACHE_DIR, default_cache_dir
 from scenes.scenario import Scenario
 from studies.engine.sweep import Execution
 
+__all__ = [
+    "MAX_FILM_SUBPIXELS",
+    "MAX_RENDER_SAMPLES",
+    "MAX_SEEDS",
+    "UsageError",
+    "check_finite",
+    "check_render_cache",
+    "check_render_work",
+    "check_scheduler",
+    "check_seeds",
+    "check_workers",
+    "console",
+    "execution",
+    "out_path",
+    "parse_list",
+    "physics_points",
+    "physics_source",
+    "print_table",
+    "rich_progress",
+]
+
 log = logging.getLogger("beacon_sim")
 
 console = Console(stderr=True)

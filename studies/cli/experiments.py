@@ -49,6 +49,22 @@ from studies.experiments import e2e_detection as e2e
 from studies.experiments import saturation_table as saturation
 from studies.experiments import tracker_pruning as pruning
 
+__all__ = [
+    "COMMANDS",
+    "MAX_SAMPLES",
+    "bench",
+    "calibrate_unknowns",
+    "colour_reach",
+    "crop_vs_full",
+    "design",
+    "diffuser_mosaic",
+    "e2e_detection",
+    "saturation_table",
+    "sensitivity",
+    "tracker_pruning",
+    "unknowns_search",
+]
+
 MAX_SAMPLES = 2**16
 """Most points an unknowns search accepts: each is scored on every close-range condition, side
 and seed, about 40 frames, so 2^16 points are millions of frames."""

@@ -24,6 +24,16 @@ from studies.cli import options as opt
 from studies.cli.common import UsageError, print_table
 from studies.engine import strict_json
 
+__all__ = [
+    "COMMANDS",
+    "HARDWARE_FILE_OPTIONS",
+    "SELECTING_OPTIONS",
+    "beacons",
+    "camera_rows",
+    "cameras",
+    "use_hardware_files",
+]
+
 HARDWARE_FILE_OPTIONS = {"--camera-file": "camera", "--beacon-file": "beacon"}
 """The hardware-file options and the kind of hardware each adds."""
 

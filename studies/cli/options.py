@@ -16,6 +16,41 @@ import typer
 from scenes.scenario import RenderSettings, Scenario
 from studies.cli.common import check_render_work, out_path
 
+__all__ = [
+    "SCENARIO_OPTIONS",
+    "Beacon",
+    "BudgetFrames",
+    "Camera",
+    "Cameras",
+    "CurrentMA",
+    "Environment",
+    "Foam",
+    "Gain",
+    "HeightM",
+    "Housing",
+    "Iso",
+    "Json",
+    "NoCache",
+    "Out",
+    "Oversampling",
+    "PaperColour",
+    "PhysicsFrom",
+    "RangeM",
+    "Scheduler",
+    "Seed",
+    "Seeds",
+    "Sheets",
+    "Side",
+    "Spp",
+    "TargetRelative",
+    "TargetWidthM",
+    "Uncertainty",
+    "Workers",
+    "YawDeg",
+    "scenario_command",
+    "scenario_from",
+]
+
 Out = Annotated[Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory.")]
 Json = Annotated[bool, typer.Option("--json", help="Print JSON (for scripts) instead of a table.")]
 Beacon = Annotated[str, typer.Option("--beacon", help="Beacon design: v1 or v2.")]

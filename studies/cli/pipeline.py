@@ -33,6 +33,8 @@ from studies.cli import options as opt
 from studies.cli.common import UsageError, console
 from studies.engine import strict_json
 
+__all__ = ["COMMANDS", "RING_CAMERAS", "calibrate", "detect"]
+
 RING_CAMERAS = 6
 """Cameras on the study's ring (numbered 0..5)."""
 

@@ -22,6 +22,8 @@ from studies.cli.common import check_render_cache, console
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine import strict_json
 
+__all__ = ["COMMANDS", "render", "write_render"]
+
 
 @opt.scenario_command
 def render(

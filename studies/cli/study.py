@@ -21,6 +21,8 @@ from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
 from studies.engine.tasks import grid_conditions
 
+__all__ = ["COMMANDS", "DESIGN_OPTIONS", "main_job", "study", "validate"]
+
 OutResumable = Annotated[
     Path, typer.Option("--out", parser=out_path, metavar="DIR", help="Output directory (re-run to resume).")
 ]

@@ -8,6 +8,8 @@ from studies.cli.common import print_table
 from studies.engine import strict_json
 from studies.engine.unknowns import load_unknowns
 
+__all__ = ["COMMANDS", "unknown_rows", "unknowns"]
+
 
 def unknown_rows() -> list[dict]:
     """Every unknown as plain data: name, target, kind, range, nominal, unit, cameras, how it acts, reason."""

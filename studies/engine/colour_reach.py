@@ -35,6 +35,21 @@ from scenes import spectra
 from scenes.diffusers import paper
 from scenes.led import led_for_side
 
+__all__ = [
+    "DOMINANT_SHIFTS_NM",
+    "HIGHLIGHTS",
+    "LEVELS",
+    "WHITE_BALANCES",
+    "Reach",
+    "in_boxes",
+    "light_spectrum",
+    "patch_colours",
+    "raw_response",
+    "reach",
+    "reach_table",
+    "trajectory_figure",
+]
+
 LEVELS = np.geomspace(0.02, 200.0, 121)
 """Exposures tried: the largest raw channel from 2 % of the clip level to 200 times it."""
 PATCH_PX = 16

@@ -45,6 +45,25 @@ from scenes.render_cache import RenderCache
 from scenes.scenario import RenderSettings, Scenario
 from studies.engine.frame_task import FrameTask
 
+__all__ = [
+    "FRAME_VERSION",
+    "NOISE_SEED_FIELDS",
+    "ROW_FIELDS",
+    "CapturedFrame",
+    "aligned_radiance",
+    "camera_with_overrides",
+    "capture_frame",
+    "detect_options",
+    "frame_inputs",
+    "frame_scenario",
+    "marker_colours",
+    "noise_seed",
+    "other_beacons",
+    "render_batch_key",
+    "simulate_frame",
+    "target_crop_png",
+]
+
 FRAME_VERSION = 10
 """Bump when a change alters the rows a task produces (invalidates stored results).
 3: rows carry the detector's failure code and the true side's blob count.

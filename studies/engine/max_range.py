@@ -63,6 +63,22 @@ from scipy.stats import chi2
 
 from studies.engine.scoring import failure_cause, pose_success
 
+__all__ = [
+    "COLUMNS",
+    "LN19",
+    "PLATEAU_TOL",
+    "PROFILE_DROP",
+    "MaxRange",
+    "estimate_max_range",
+    "far_interval_text",
+    "far_limit_text",
+    "far_side",
+    "near_failures_text",
+    "profile_loglik",
+    "working_range_text",
+    "works_best_key",
+]
+
 COLUMNS = (
     "range_m",
     "nominal_range_m",

@@ -13,6 +13,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import beta, norm
 
+__all__ = [
+    "bayes_error",
+    "confusion_matrix",
+    "delta_e_2000",
+    "fisher_d_prime",
+    "jeffreys_interval",
+    "mahalanobis_separability",
+    "marker_snr",
+    "merge_margin_px",
+    "rgb_chromaticity",
+    "wilson_interval",
+    "wilson_intervals",
+]
+
 
 # -- detection ---------------------------------------------------------------------------
 def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float, float]:

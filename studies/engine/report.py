@@ -27,6 +27,18 @@ from pathlib import Path
 
 from scenes.render_cache import atomic_write_bytes
 
+__all__ = [
+    "FIGURE_DPI",
+    "PACKAGE",
+    "PAGE_WIDTH_IN",
+    "PageContext",
+    "Provenance",
+    "Report",
+    "meta_line",
+    "page_context",
+    "provenance",
+]
+
 FIGURE_DPI = 100
 """Resolution of embedded figures, pixels per inch."""
 PAGE_WIDTH_IN = 11.0

@@ -71,6 +71,38 @@ from scenes.hardware import HardwareSet, install_hardware, user_hardware
 from scenes.render_cache import atomic_write_bytes, content_key
 from studies.engine.strict_json import decode_non_finite, encode_non_finite
 
+__all__ = [
+    "DASK_POLL_S",
+    "DISK_FULL",
+    "MACHINE_COLUMNS",
+    "MACHINE_LOG",
+    "NO_WORKER_TIMEOUT_S",
+    "PARENT_POLL_S",
+    "PR_SET_PDEATHSIG",
+    "SCHEDULER_TIMEOUT_S",
+    "MachineLog",
+    "NoWorkersError",
+    "Progress",
+    "ResultStore",
+    "RunStopped",
+    "TaskFunction",
+    "WorkerWatchdog",
+    "die_with_parent",
+    "disk_full_names",
+    "function_name",
+    "no_progress",
+    "open_in_place",
+    "run_batch",
+    "run_one",
+    "run_tasks",
+    "selftest_task",
+    "stop_pool",
+    "task_key",
+    "without_machine_columns",
+    "worker_start",
+    "worker_threads",
+]
+
 logger = logging.getLogger("beacon_sim")
 
 TaskFunction = Callable[[dict], list[dict]]

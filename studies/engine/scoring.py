@@ -21,6 +21,17 @@ from numpy.typing import NDArray
 
 from pipeline.failures import Failure
 
+__all__ = [
+    "CAUSES",
+    "CLIPPED_CORES",
+    "RANGE_TOLERANCE",
+    "YAW_TOLERANCE_DEG",
+    "detection_success",
+    "detection_successes",
+    "failure_cause",
+    "pose_success",
+]
+
 RANGE_TOLERANCE = 0.10
 """Largest relative range error of a usable pose (10 %)."""
 YAW_TOLERANCE_DEG = 5.0

@@ -23,6 +23,8 @@ from studies.engine.scoring import detection_success
 from studies.engine.tables import parquet_bytes, write_tables
 from studies.engine.tasks import StudyOptions, frame_task, frame_tasks
 
+__all__ = ["Execution", "Screening", "run_frames", "sweep", "sweep_in_chunks", "sweep_screened"]
+
 
 @dataclass(frozen=True)
 class Execution:

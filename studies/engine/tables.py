@@ -13,6 +13,8 @@ from scenes.render_cache import atomic_write_bytes
 from studies.engine.metrics import jeffreys_interval, wilson_intervals
 from studies.engine.scoring import detection_successes, failure_cause, pose_success
 
+__all__ = ["CSV_MAX_ROWS", "detection_curve", "parquet_bytes", "pose_outcomes", "write_tables"]
+
 CSV_MAX_ROWS = 1_000_000
 """Above this many rows only results.parquet is written (a CSV would take gigabytes)."""
 

@@ -39,6 +39,18 @@ from scenes.scenario import MAX_RANGE_M
 from scenes.view import camera_names
 from studies.engine.unknowns import apply, load_unknowns
 
+__all__ = [
+    "FRAMES",
+    "GRID_AXES",
+    "RENDER",
+    "STUDY_CAMERAS",
+    "StudyOptions",
+    "frame_task",
+    "frame_tasks",
+    "grid_conditions",
+    "jitter",
+]
+
 FRAMES = ("full", "crop")
 """What a study's frames are: ``full``, the camera's whole saved frame (the rendered crop inside
 a frame-sized background, sensor noise, ISP and JPEG on all of it), or ``crop``, the rendered

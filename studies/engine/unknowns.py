@@ -42,6 +42,19 @@ from scenes.sourced import DataFileError, load_sourced, load_tables
 from scenes.view import camera_names
 from studies.engine.frame_task import MORPHOLOGY_FIELDS, FrameTask
 
+__all__ = [
+    "CAMERA_GROUPS",
+    "KINDS",
+    "TRACKER_FIELDS",
+    "Unknown",
+    "apply",
+    "data_file_value",
+    "fixed",
+    "load_unknowns",
+    "nominal",
+    "sample",
+]
+
 UNKNOWNS_FILE = Path(__file__).resolve().parents[1] / "data" / "unknowns.toml"
 KINDS = ("uniform", "loguniform", "choice", "fixed")
 CAMERA_GROUPS = ("lens", "sensor", "isp", "exposure", "effects")

@@ -54,6 +54,28 @@ from studies.engine.tasks import GRID_AXES, RENDER, frame_tasks
 from studies.experiments import equivalence
 from studies.experiments.two_stage_check import MarkerView, brute_force_scene, render_passes, two_stage_scene
 
+__all__ = [
+    "BENCH_SCENARIO",
+    "FULL_STUDIES",
+    "RECORDED_RUNS",
+    "STUDY_MIX",
+    "WHOLE_FRAME_CAMERAS",
+    "cold_renders",
+    "equivalence_statistics",
+    "frame_vs_memcpy",
+    "full_grid_estimate",
+    "grid_sample",
+    "recorded_runs",
+    "replication_tables",
+    "reuse_vs_rerender",
+    "study_mix",
+    "two_stage_vs_brute_force",
+    "variant_ratio",
+    "warm_frames",
+    "whole_frame_paths",
+    "workers_and_dask",
+]
+
 
 def _relative_noise(images: np.ndarray, mask: np.ndarray, reference: np.ndarray) -> float:
     """Normalised RMS noise of one pass: √(mean over the marker of the per-pixel

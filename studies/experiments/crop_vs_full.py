@@ -44,6 +44,20 @@ from studies.engine import strict_json
 from studies.engine.scoring import detection_success, pose_success
 from studies.engine.tasks import RENDER, STUDY_CAMERAS, StudyOptions, frame_tasks, grid_conditions
 
+__all__ = [
+    "RANGES_M",
+    "ROW_COLUMNS",
+    "SEEDS",
+    "SUMMARY_COLUMNS",
+    "CropVsFull",
+    "compare_pair",
+    "comparison_tasks",
+    "cost",
+    "run",
+    "summarise",
+    "timed_rows",
+]
+
 RANGES_M = (2.0, 5.0)
 """Ranges of the comparison, m (camera → marker 1)."""
 SEEDS = 3

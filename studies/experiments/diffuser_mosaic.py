@@ -22,6 +22,8 @@ from scenes.near_field import NearFieldSettings, marker_emission
 from scenes.render_cache import RenderCache
 from studies.experiments.two_stage_check import MarkerView, render_passes, two_stage_scene
 
+__all__ = ["diffuser_mosaic"]
+
 
 def diffuser_mosaic(
     out_png: Path,

@@ -59,6 +59,25 @@ from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
 from studies.engine.tasks import GRID_AXES, StudyOptions, frame_tasks, grid_conditions
 
+__all__ = [
+    "ALIGN_PX",
+    "EXPOSURE",
+    "FULL_FRAME_CONDITION",
+    "ORDER",
+    "RENDER",
+    "SUMMARY_COLUMNS",
+    "E2EResult",
+    "aggregate",
+    "default_options",
+    "describe",
+    "full_frame_check",
+    "run",
+    "summarise",
+    "summary_markdown",
+    "tasks",
+    "write_outputs",
+]
+
 RANGES_M = (1.0, 2.0, 3.0, 4.0, 5.0)
 YAWS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 QUICK_RANGES_M = (1.0, 3.0, 5.0)

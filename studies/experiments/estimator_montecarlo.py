@@ -31,6 +31,8 @@ from pipeline.thesis_pose import STUDY_WEIGHTS, attitude_and_pose, thesis_ranges
 from scenes.scenario import Scenario
 from scenes.view import camera_geometry
 
+__all__ = ["pose_error_trials"]
+
 ESTIMATORS = ("best", "quest", "thesis")
 
 

@@ -37,6 +37,20 @@ from scenes import spectra
 from scenes.radiance import PixelGrid, RadianceComponent, SpectralRadiance
 from scenes.view import CameraGeometry
 
+__all__ = [
+    "BLACK",
+    "INNER",
+    "WHITE",
+    "LensCalibration",
+    "board_image",
+    "board_poses",
+    "board_radiance",
+    "calibrate",
+    "project_true",
+    "projection_curves",
+    "scaled_camera",
+]
+
 INNER = PATTERN_INNER_CORNERS
 """The study's board (docs/source-study.md §10): 8 × 6 inner corners (OpenCV's pattern size), 24.4 mm squares."""
 WHITE, BLACK = 1.0, 0.05

@@ -40,6 +40,20 @@ from studies.engine.frame import FRAME_VERSION, capture_frame, render_batch_key
 from studies.engine.runner import Progress, no_progress, run_tasks
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
 
+__all__ = [
+    "CAMERAS",
+    "DIFFUSERS",
+    "FIELDS",
+    "ORDER",
+    "ROWS_VERSION",
+    "ae_settled",
+    "saturation_rows",
+    "saturation_rows_of",
+    "saturation_tasks",
+    "summary_markdown",
+    "write_csv",
+]
+
 CAMERAS = ("canon-t6-18mm", "canon-t6-10mm", "logitech-c270", "spedal-920")
 RANGES_M = (2.0, 5.0)
 DRIVES_MA = (2.0, 5.0, 10.0, 20.0)

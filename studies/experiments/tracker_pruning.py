@@ -35,6 +35,8 @@ from studies.catalog import STUDIES
 from studies.engine.frame import capture_frame
 from studies.engine.tasks import frame_tasks, grid_conditions
 
+__all__ = ["QUICK_STUDIES", "compare_frame", "run", "study_tasks"]
+
 QUICK_STUDIES = ("webcam-vs-dslr", "brightness-diffuser", "range-limit", "replication")
 """Studies whose quick grids are used by default."""
 

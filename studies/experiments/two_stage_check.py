@@ -42,6 +42,18 @@ from scenes.shapes import disk_shape
 from scenes.spectra import WAVELENGTHS_NM
 from scenes.view import camera_geometry
 
+__all__ = [
+    "Comparison",
+    "MarkerView",
+    "PassStats",
+    "brute_force_scene",
+    "compare",
+    "flux_and_profile",
+    "relative_rms_error",
+    "render_passes",
+    "two_stage_scene",
+]
+
 
 @dataclass(frozen=True)
 class MarkerView:
