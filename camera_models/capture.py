@@ -146,7 +146,7 @@ def frame_meter(
 
 
 def noiseless_raw(mean_electrons: NDArray[np.float64], camera: Camera, settings: SensorSettings) -> NDArray[np.uint16]:
-    """Raw frame (DN, uint16) of a sensor without noise: the steps of :func:`camera_models.sensor.expose`
+    """Raw frame (DN, uint16) of a sensor without noise: the steps of :func:`camera_models.sensor_paths.expose`
     with every temporal and fixed-pattern term at zero.
 
     Each pixel's mean photo-electrons plus the mean dark charge (dark current × exposure

@@ -57,6 +57,7 @@ from studies.engine.uncertainty import (
 __all__ = [
     "CAMERA_STYLES",
     "DRIVES_MA",
+    "FULL_UNIT_BUDGET_FRAMES",
     "NAME",
     "RANGE_LABELS",
     "UNIT_FIELDS",

@@ -45,6 +45,7 @@ __all__ = [
     "TargetRelative",
     "TargetWidthM",
     "Uncertainty",
+    "UnitBudgetFrames",
     "Workers",
     "YawDeg",
     "scenario_command",
