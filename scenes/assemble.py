@@ -28,6 +28,7 @@ from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
 from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.scenario import Scenario, ScenarioError
 from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
+from scenes.tube_walls import heightfield_mesh, tube_wall_shapes
 from scenes.view import project
 
 __all__ = [
@@ -203,8 +204,17 @@ def room_extent(scenario: Scenario) -> tuple[np.ndarray, float, float]:
 
 
 def environment_shapes(scenario: Scenario) -> list[dict]:
-    """Floor, ceiling and walls of the box around the camera-beacon line."""
+    """Floor, ceiling and walls of the box around the camera-beacon line, or the tube's around the
+    beacon where the scenario has :attr:`~scenes.scenario.Scenario.tube_walls`
+    (:func:`scenes.tube_walls.tube_wall_shapes`)."""
     env, design = scenario.env, scenario.design
+    if scenario.tube_walls is not None:
+        return tube_wall_shapes(
+            scenario.tube_walls,
+            target_rotation=scenario.target_to_world()[0],
+            floor_z_m=design.target_height_m,
+            camera_position_m=scenario.render_pose().position_m,
+        )
     along, s0, s1 = room_extent(scenario)
     down = np.array([0.0, 0.0, 1.0])
     across = np.cross(down, along)
@@ -353,6 +363,9 @@ def to_mitsuba(spec: dict, spp: int) -> dict:
             "bsdf": {"type": "diffuse", "reflectance": float(rho)},
         }
     for i, sh in enumerate(spec["shapes"]):
+        if sh["type"] == "heightfield":
+            scene[f"shape_{i:04d}"] = _heightfield(sh, spec["materials"][sh["material"]], f"shape_{i:04d}")
+            continue
         d: dict = {"type": sh["type"], "bsdf": {"type": "ref", "id": f"mat_{sh['material']}"}}
         if "matrix" in sh:
             d["to_world"] = xf(sh["matrix"])
@@ -375,3 +388,20 @@ def to_mitsuba(spec: dict, spp: int) -> dict:
                 d["emitter"]["instance"] = i
         scene[f"shape_{i:04d}"] = d
     return scene
+
+
+def _heightfield(shape: dict, reflectance: float, name: str):
+    """A ``heightfield`` shape (:func:`scenes.tube_walls.heightfield_mesh`) as a Mitsuba mesh with a
+    two-sided diffuse BSDF of ``reflectance``."""
+    import mitsuba as mi
+
+    vertices, faces = heightfield_mesh(shape)
+    props = mi.Properties()
+    props.set_id(name)
+    props["bsdf"] = mi.load_dict({"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": float(reflectance)}})
+    mesh = mi.Mesh(name, len(vertices), len(faces), props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(vertices.reshape(-1))
+    params["faces"] = mi.UInt32(faces.reshape(-1))
+    params.update()
+    return mesh

@@ -31,6 +31,7 @@ from scenes.data_overrides import GAIN, check_data_overrides, data_path
 from scenes.diffusers import DiffuserConfig
 from scenes.environment import Environment, environment
 from scenes.led import LED, led_for_side
+from scenes.tube_walls import TubeWalls, tube_wall_shapes
 from scenes.view import CameraGeometry, CameraPose, camera_geometry
 
 __all__ = ["MAX_RANGE_M", "RenderSettings", "Scenario", "ScenarioError"]
@@ -212,10 +213,12 @@ class Scenario:
     render: RenderSettings = field(default_factory=RenderSettings)
     data: tuple[tuple[str, float], ...] = ()
     dust_extinction_per_m: float = 0.0
+    tube_walls: TubeWalls | None = None
 
     def __post_init__(self) -> None:
         try:  # checked, and as the canonical sorted tuple of (path, value) (a mapping or JSON's lists in)
             object.__setattr__(self, "data", check_data_overrides(self.data, beacon=str(self.beacon)))
+            object.__setattr__(self, "tube_walls", TubeWalls.coerce(self.tube_walls))
         except (TypeError, ValueError) as exc:
             raise ScenarioError(str(exc)) from None
         self.validate()
@@ -270,6 +273,23 @@ class Scenario:
         except ValueError as exc:
             raise ScenarioError(f"data: {exc}") from None
         self.render.validate()
+        if self.tube_walls is not None:
+            if self.env.kind != "cave":
+                raise ScenarioError(f"tube_walls: a tube's walls only in a cave environment, not {self.environment!r}")
+            try:
+                self.tube_walls.validate()
+                self._check_tube_walls()
+            except ValueError as exc:
+                raise ScenarioError(str(exc)) from None
+
+    def _check_tube_walls(self) -> None:
+        """Raise ValueError where the camera stands outside :attr:`tube_walls`."""
+        tube_wall_shapes(
+            self.tube_walls,
+            target_rotation=self.target_to_world()[0],
+            floor_z_m=self.design.target_height_m,
+            camera_position_m=self.render_pose().position_m,
+        )
 
     # -- derived ----------------------------------------------------------------------
     @property
@@ -397,13 +417,13 @@ class Scenario:
     # -- identity ---------------------------------------------------------------------
     def to_dict(self) -> dict:
         """Plain-data form (JSON-able); ``data`` as a mapping, left out when empty, and ``pan_deg``,
-        ``tilt_deg`` and ``dust_extinction_per_m`` left out at 0 (so scenarios without them keep the
-        keys they had before they existed)."""
+        ``tilt_deg`` and ``dust_extinction_per_m`` left out at 0 and ``tube_walls`` when None (so
+        scenarios without them keep the keys they had before they existed)."""
         out = dataclasses.asdict(self)
         out.pop("data")
         if self.data:
             out["data"] = dict(self.data)
-        for name in ("pan_deg", "tilt_deg", "dust_extinction_per_m"):  # left out at 0: keys kept
+        for name in ("pan_deg", "tilt_deg", "dust_extinction_per_m", "tube_walls"):  # left out at 0: keys kept
             if not out[name]:
                 out.pop(name)
         return out

@@ -36,8 +36,10 @@ Dust (``dust_extinction_per_m``, rendered frames only) dims every beacon's light
 its range (:attr:`scenes.scenario.Scenario.dust_transmittance`; the light it scatters into the view
 is left out, so it costs at least that much).
 
-What this is not (yet): the tube's own walls in the frames (they use the dark environment's basalt
-box around each beacon), slip that changes along the run. The beacons the robot chooses among are
+Rendered frames hold the tube's own basalt walls, ceiling and rough floor around each beacon
+(:class:`scenes.tube_walls.TubeWalls`: the straight stretch along the tube's axis where the beacon
+stands; the floor may slope). What this is not (yet): slip that changes along the run, the slope in
+the robot's planar filter (it takes the horizontal part of each fix). The beacons the robot chooses among are
 those truly in a camera's view (a robot would take them from its map around its predicted pose).
 
 Outputs in ``out``: ``steps.parquet`` (one row per spacing × seed × step: truth, odometry, fix and
@@ -75,6 +77,7 @@ from scenes.dust import visual_range_m
 from scenes.render_cache import atomic_write_bytes
 from scenes.scenario import Scenario
 from scenes.tube import Tube
+from scenes.tube_walls import TubeWalls, tube_defaults
 from scenes.view import camera_geometry
 from studies.engine import strict_json
 from studies.engine.frame import capture_frame, detect_options, render_batch_key
@@ -204,6 +207,13 @@ class Traverse:
     dust_extinction_per_m
         Airborne dust's extinction coefficient, m⁻¹ (0: clear air; rendered frames only; Koschmieder
         visual range 3.912 / σ).
+    tube_walls, tube_height_m, slope_deg, floor_rms_m, floor_correlation_m
+        Rendered frames only: whether they hold the tube's own walls, ceiling and rough floor around
+        each beacon (:class:`scenes.tube_walls.TubeWalls`; False: the dark environment's box around
+        the camera-beacon line), the tube's height (m), the floor's rise along the tube (degrees: a
+        camera stands higher or lower than the beacon by its distance along the tube times the
+        slope's tangent, and the robot pitches with the floor), and the floor's roughness (m); the
+        defaults are ``scenes/data/tube.toml``'s.
     wander_m
         Amplitude of the robot's sideways wander about the centreline (m), one period per 20 m.
     first_beacon_m
@@ -228,6 +238,11 @@ class Traverse:
     bend_at_m: float = 20.0
     bend_radius_m: float = 6.0
     dust_extinction_per_m: float = 0.0
+    tube_walls: bool = True
+    tube_height_m: float = field(default_factory=lambda: tube_defaults()["height_m"])
+    slope_deg: float = 0.0
+    floor_rms_m: float = field(default_factory=lambda: tube_defaults()["floor_rms_m"])
+    floor_correlation_m: float = field(default_factory=lambda: tube_defaults()["floor_correlation_m"])
     first_beacon_m: float = 0.0
     led_current_mA: float = 2.0
     odometry: dict = field(default_factory=dict)
@@ -244,6 +259,13 @@ class Traverse:
         if not 0 <= self.wander_m < self.tube_width_m / 2 - self.wall_offset_m:
             raise ValueError(f"wander_m: expected a wander that keeps the robot off the beacons, got {self.wander_m!r}")
         self.tube.validate()
+        for name in ("tube_height_m", "floor_correlation_m"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise ValueError(f"{name}: expected a length > 0 m, got {getattr(self, name)!r}")
+        if not (math.isfinite(self.slope_deg) and abs(self.slope_deg) < 45):
+            raise ValueError(f"slope_deg: expected an angle in (-45, 45) degrees, got {self.slope_deg!r}")
+        if not (math.isfinite(self.floor_rms_m) and 0 <= self.floor_rms_m < self.tube_height_m / 4):
+            raise ValueError(f"floor_rms_m: expected >= 0 m, under a quarter of the height, got {self.floor_rms_m!r}")
         if not (math.isfinite(self.dust_extinction_per_m) and self.dust_extinction_per_m >= 0):
             raise ValueError(f"dust_extinction_per_m: expected >= 0 per m, got {self.dust_extinction_per_m!r}")
         beacon_design(self.beacon)
@@ -253,6 +275,28 @@ class Traverse:
     def tube(self) -> Tube:
         """The tube's floor plan."""
         return Tube(self.tube_width_m, self.bend_deg, self.bend_at_m, self.bend_radius_m)
+
+    def walls_at(self, axis_deg: float, beacon_at: tuple[float, float, float], camera_left_m: float = 0.0) -> TubeWalls:
+        """The tube around a beacon (by the left wall, ``wall_offset_m`` from it) for a render whose
+        target frame has the tube's axis at ``axis_deg``; the beacon at ``beacon_at`` on the floor plan
+        (x, y in m, the tube's heading in rad), on the tube's one floor (seed 0). The render's
+        stretch is straight (the tangent where the beacon stands): around a bend a camera can stand
+        beyond its walls (``camera_left_m``: the camera's distance left of the beacon's axis), and
+        the wall on its side is then moved out to the ring's radius beyond the camera (the walls
+        near the beacon, which its light reaches first, stay where they are)."""
+        left, right = self.wall_offset_m, self.tube_width_m - self.wall_offset_m
+        return TubeWalls(
+            axis_deg=axis_deg,
+            left_m=max(left, camera_left_m + self.radius_m),
+            right_m=max(right, -camera_left_m + self.radius_m),
+            height_m=self.tube_height_m,
+            slope_deg=self.slope_deg,
+            floor_rms_m=self.floor_rms_m,
+            floor_correlation_m=self.floor_correlation_m,
+            floor_x_m=beacon_at[0],
+            floor_y_m=beacon_at[1],
+            floor_heading_deg=round(math.degrees(beacon_at[2]), 6),
+        )
 
 
 def _rot(a: float) -> np.ndarray:
@@ -326,6 +370,8 @@ class Sighting:
         v 90° counter-clockwise seen from above; m) and optical axis (counter-clockwise from u; rad).
     bearing_rad
         Direction to marker 1 from the camera's axis, counter-clockwise seen from above, rad.
+    beacon_at
+        The beacon's place on the floor plan: x, y (m) and the tube's heading there (rad).
     """
 
     camera: int
@@ -335,6 +381,7 @@ class Sighting:
     v_m: float
     psi_rad: float
     bearing_rad: float
+    beacon_at: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def range_m(self) -> float:
@@ -367,7 +414,8 @@ def sightings(t: Traverse, fov_rad: float, d_t_m: float, robot: np.ndarray, beac
             if rel[0] <= 0 or abs(bearing) > fov_rad / 2 or not tube.clear(cam, origin):
                 continue
             psi = math.remainder(axis - alpha, 2 * math.pi)
-            out.append(Sighting(k, b, side, float(rel[0]), float(rel[1]), psi, bearing))
+            at = (round(float(centre[0]), 6), round(float(centre[1]), 6), round(float(facing), 9))
+            out.append(Sighting(k, b, side, float(rel[0]), float(rel[1]), psi, bearing, at))
     return out
 
 
@@ -430,7 +478,11 @@ def frame_task(t: Traverse, s: Sighting, seed: int, others: Sequence[Sighting] =
 
 
 def _scenario(t: Traverse, s: Sighting) -> dict:
-    """The Scenario fields of a sighting (:func:`frame_task`)."""
+    """The Scenario fields of a sighting (:func:`frame_task`). The tube's axis, in the side's planar
+    frame at −``SIDE_ANGLES[side]`` (red faces along it), is at +that angle in the target frame (whose
+    angles run the other way, as the yaw's); on a slope the camera stands ``along · tan(slope)``
+    above marker 1 (``along``: its distance along the tube's axis from the beacon's foot; the ring at
+    marker 1's height above its own floor) and its axis pitches with the floor along its heading."""
     scenario = {
         "beacon": t.beacon,
         "side": s.side,
@@ -443,6 +495,19 @@ def _scenario(t: Traverse, s: Sighting) -> dict:
     }
     if t.dust_extinction_per_m:
         scenario["dust_extinction_per_m"] = t.dust_extinction_per_m
+    axis = SIDE_ANGLES[s.side]
+    u_axis = s.u_m + beacon_design(t.beacon).d_t_m  # the camera from the beacon's axis, where it stands
+    if t.slope_deg:
+        grade = math.tan(math.radians(t.slope_deg))
+        height = (u_axis * math.cos(axis) - s.v_m * math.sin(axis)) * grade
+        pitch = math.atan(grade * math.cos(s.psi_rad + axis))  # the camera's axis, up from level
+        elevation = math.atan2(-height, s.range_m)  # marker 1 seen from the camera, up from level
+        scenario["range_m"] = round(math.hypot(s.range_m, height), 4)
+        scenario["camera_height_m"] = round(height, 4)
+        scenario["tilt_deg"] = round(math.degrees(pitch - elevation), 3)
+    if t.tube_walls:
+        camera_left = u_axis * math.sin(axis) + s.v_m * math.cos(axis)
+        scenario["tube_walls"] = t.walls_at(round(math.degrees(axis), 6), s.beacon_at, camera_left).to_dict()
     return scenario
 
 
@@ -792,14 +857,21 @@ def run(
     return summary
 
 
-def _source_text(detections: dict) -> str:
+def _source_text(detections: dict, t: Traverse) -> str:
     """Where the report's detections came from, in words."""
     if detections["rendered"]:
+        tube = (
+            f"the dark tube's basalt walls, ceiling ({t.tube_height_m:g} m) and rough floor ({t.floor_rms_m:g} m rms, "
+            f"{t.floor_correlation_m:g} m correlation) around each beacon"
+            if t.tube_walls
+            else "the dark environment's box around each camera-beacon line"
+        )
+        slope = f", the floor rising {t.slope_deg:g}° along the tube" if t.slope_deg else ""
         return (
             f"Detections from {detections['frames']} rendered whole frames, one per ring camera and step holding "
             f"every beacon side it had in its field within {detections['max_range_m']:g} m (1.5× the farthest "
             f"correct pose of {detections['source']}; farther ones count as missed), the camera turned by the "
-            "bearing, the dark tube, detected by the best tracker and estimator after the lens's rectification; "
+            f"bearing, {tube}{slope}, detected by the best tracker and estimator after the lens's rectification; "
             "each detection taken for the beacon in view whose pose fits the filter's prediction best."
         )
     return (
@@ -826,7 +898,7 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
         [
             f"Largest beacon spacing that keeps the position error under {summary['spacing']['threshold_m']:g} m: "
             f"{summary['spacing_answer']}.",
-            _source_text(summary["detections"]),
+            _source_text(summary["detections"], t),
             "Wheel odometry on loose sand with the slip drawn per run and constant along it; the filter (EKF) "
             "learns the odometer's scale from the fixes (a state, with a random walk) and gates every detection "
             f"whose pose lies beyond χ²₃ = {GATE_CHI2:g} of its prediction.",

@@ -62,6 +62,26 @@ def traverse(
             show_default="clear air",
         ),
     ] = None,
+    tube_width_m: Annotated[float, typer.Option("--tube-width-m", help="Wall to wall, m.")] = 3.0,
+    tube_height_m: Annotated[
+        float | None,
+        typer.Option("--tube-height-m", help="Floor to ceiling, m (rendered frames).", show_default="5, tube.toml"),
+    ] = None,
+    slope_deg: Annotated[
+        float,
+        typer.Option(
+            "--slope-deg",
+            help="The tube's floor rises by this angle along it (degrees, rendered frames: camera heights and pitch).",
+        ),
+    ] = 0.0,
+    tube_walls: Annotated[
+        bool,
+        typer.Option(
+            "--tube-walls/--no-tube-walls",
+            help="Rendered frames hold the tube's basalt walls, ceiling and rough floor (scenes/data/tube.toml); "
+            "off: the dark environment's box around each camera-beacon line.",
+        ),
+    ] = True,
     quick: Annotated[
         bool,
         typer.Option(
@@ -91,9 +111,13 @@ def traverse(
         raise UsageError(f"dust-visibility-m: expected a visual range > 0 m, got {dust_visibility_m:g}")
     if dust_visibility_m is not None and not rendered:
         raise UsageError("dust-visibility-m: dust acts on rendered frames; add --rendered")
+    if slope_deg and not rendered:
+        raise UsageError("slope-deg: the slope acts on rendered frames; add --rendered")
     settings = tr.Traverse(
         camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m, step_m=step_m,
-        bend_deg=bend_deg, bend_at_m=bend_at_m, bend_radius_m=bend_radius_m,
+        bend_deg=bend_deg, bend_at_m=bend_at_m, bend_radius_m=bend_radius_m, slope_deg=slope_deg,
+        tube_width_m=tube_width_m, **({} if tube_height_m is None else {"tube_height_m": tube_height_m}),
+        tube_walls=tube_walls,
         dust_extinction_per_m=0.0 if dust_visibility_m is None else extinction_per_m(dust_visibility_m),
     )  # fmt: skip
     source = detections or tr.DEFAULT_TABLE

@@ -66,6 +66,40 @@ def test_a_sightings_frame_task_is_the_same_pose():
         assert math.remainder(psi - s.psi_rad, 2 * math.pi) == pytest.approx(0.0, abs=1e-4)
 
 
+@pytest.mark.parametrize("slope_deg", [0.0, 8.0])
+def test_a_sightings_frame_has_the_tubes_walls_and_slope_where_the_plan_has_them(slope_deg):
+    """The walls of a sighting's render (in its beacon frame) stand where the traverse's floor plan has
+    them: the camera's distance to the left wall (the plan's y = width / 2 for a straight tube along
+    x) and its distance along the tube from the beacon; on a slope the camera stands that distance
+    times tan(slope) above marker 1, and its axis, read back from the scenario's own pose, pitches
+    with the floor along its heading."""
+    from pipeline.frames import pose_from_scenario
+    from scenes.scenario import Scenario
+
+    t = tr.Traverse(slope_deg=slope_deg)
+    ring = tr._ring(t)
+    beacons = tr._beacons(t, 4.0)[:2]  # by the left wall, facing along the tube
+    robot = np.array([1.0, -0.1, 0.3])
+    seen = tr.sightings(t, ring.fov_rad, ring.d_t_m, robot, beacons)
+    assert {s.side for s in seen} == {"blue", "yellow"}  # the robot comes from behind, right of the beacons
+    grade = math.tan(math.radians(slope_deg))
+    for s in seen:
+        sc = Scenario(**tr.frame_task(t, s, 0)["scenario"])
+        walls, rot = sc.tube_walls, sc.target_to_world()[0]
+        cam_b = sc.render_pose().position_m
+        heading = robot[2] + 2 * math.pi * s.camera / t.cameras_n
+        cam = robot[:2] + t.radius_m * np.array([math.cos(heading), math.sin(heading)])
+        across = walls.left_m + float(cam_b @ (rot @ walls.right()))
+        assert across == pytest.approx(t.tube_width_m / 2 - cam[1], abs=2e-3)
+        along = float(
+            np.hypot(*(cam - beacons[s.beacon, :2])) * math.cos(math.atan2(*(cam - beacons[s.beacon, :2])[::-1]))
+        )
+        assert sc.camera_height_m == pytest.approx(along * grade, abs=2e-3)
+        axis = pose_from_scenario(sc).cv_from_t.T @ np.array([0.0, 0.0, 1.0])  # optical axis in T (z down)
+        pitch = math.degrees(math.asin(-axis[2]))
+        assert pitch == pytest.approx(math.degrees(math.atan(grade * math.cos(heading))), abs=0.05)
+
+
 def test_a_rendered_noise_free_sighting_gives_the_robots_pose():
     """One rendered whole frame (Spedal 920, V2 at ~2.5 m seen 24° off its side's normal and 36° off the
     camera's axis, no sensor noise), detected after the lens's rectification: the robot's pose from it
@@ -157,6 +191,10 @@ def test_a_table_interpolates_the_measured_fractions():
         (["--bend-deg", "90", "--bend-radius-m", "1"], "bend_radius_m"),
         (["--dust-visibility-m", "10"], "dust-visibility-m"),
         (["--rendered", "--dust-visibility-m", "0"], "dust-visibility-m"),
+        (["--slope-deg", "5"], "slope-deg"),
+        (["--tube-height-m", "0"], "tube_height_m"),
+        (["--tube-width-m", "0"], "tube_width_m"),
+        (["--rendered", "--slope-deg", "50"], "slope_deg"),
         (["--rendered", "--scheduler", "tcp://127.0.0.1:1"], "scheduler"),
         (["--workers", "0"], "workers"),
     ],
