@@ -28,7 +28,7 @@ from scenes.beacon import SIDE_ANGLE_RAD, BeaconDesign, target_to_beacon
 from scenes.near_field import NearFieldSettings, housing_leak, marker_emission
 from scenes.scenario import Scenario, ScenarioError
 from scenes.shapes import beam_shape, box_shape, cylinder_shape, disk_shape, rect_shape
-from scenes.tube_walls import heightfield_mesh, tube_wall_shapes
+from scenes.tube_walls import heightfield_mesh
 from scenes.view import project
 
 __all__ = [
@@ -209,12 +209,7 @@ def environment_shapes(scenario: Scenario) -> list[dict]:
     (:func:`scenes.tube_walls.tube_wall_shapes`)."""
     env, design = scenario.env, scenario.design
     if scenario.tube_walls is not None:
-        return tube_wall_shapes(
-            scenario.tube_walls,
-            target_rotation=scenario.target_to_world()[0],
-            floor_z_m=design.target_height_m,
-            camera_position_m=scenario.render_pose().position_m,
-        )
+        return scenario.tube_shapes()
     along, s0, s1 = room_extent(scenario)
     down = np.array([0.0, 0.0, 1.0])
     across = np.cross(down, along)

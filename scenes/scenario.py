@@ -278,13 +278,14 @@ class Scenario:
                 raise ScenarioError(f"tube_walls: a tube's walls only in a cave environment, not {self.environment!r}")
             try:
                 self.tube_walls.validate()
-                self._check_tube_walls()
+                self.tube_shapes()  # the camera inside the walls
             except ValueError as exc:
                 raise ScenarioError(str(exc)) from None
 
-    def _check_tube_walls(self) -> None:
-        """Raise ValueError where the camera stands outside :attr:`tube_walls`."""
-        tube_wall_shapes(
+    def tube_shapes(self) -> list[dict]:
+        """The surfaces of :attr:`tube_walls` as scene-spec shapes in the beacon frame
+        (:func:`scenes.tube_walls.tube_wall_shapes`; ValueError where the camera stands outside them)."""
+        return tube_wall_shapes(
             self.tube_walls,
             target_rotation=self.target_to_world()[0],
             floor_z_m=self.design.target_height_m,
