@@ -28,9 +28,10 @@ Each detection's pose in the side's target frame is turned into the robot's glob
 beacon's known pose and the camera's mount, with its covariance propagated; detections farther than
 χ²₃ = :data:`GATE_CHI2` from the filter's prediction are gated out, the rest of one instant fused
 (:func:`pipeline.ring.fuse`) and used to correct **wheel odometry** (:class:`pipeline.odometry.WheelOdometry`,
-slip drawn per run from :data:`pipeline.odometry.LOOSE_SAND`, constant along the run) in a planar EKF
+slip drawn per run from :data:`pipeline.odometry.LOOSE_SAND`, constant along the run or, with the
+``odometry`` settings ``slip_sd`` and ``slip_correlation_m``, wandering along it) in a planar EKF
 (:mod:`pipeline.ekf`) that carries the odometer's scale as a state (prior from the slip range, a
-random walk :data:`SCALE_WALK_PER_M`).
+random walk :data:`SCALE_WALK_PER_M` plus the odometry model's own wander of the slip).
 
 Dust (``dust_extinction_per_m``, rendered frames only) dims every beacon's light by Beer–Lambert over
 its range (:attr:`scenes.scenario.Scenario.dust_transmittance`; the light it scatters into the view
@@ -38,8 +39,8 @@ is left out, so it costs at least that much).
 
 Rendered frames hold the tube's own basalt walls, ceiling and rough floor around each beacon
 (:class:`scenes.tube_walls.TubeWalls`: the straight stretch along the tube's axis where the beacon
-stands; the floor may slope). What this is not (yet): slip that changes along the run, the slope in
-the robot's planar filter (it takes the horizontal part of each fix). The beacons the robot chooses among are
+stands; the floor may slope). What this is not (yet): the slope in the robot's planar filter (it
+takes the horizontal part of each fix). The beacons the robot chooses among are
 those truly in a camera's view (a robot would take them from its map around its predicted pose).
 
 Outputs in ``out``: ``steps.parquet`` (one row per spacing × seed × step: truth, odometry, fix and
@@ -57,7 +58,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -118,8 +119,9 @@ detection table measured any correct pose (assumed: P(correct) falls from its la
 0 within a third of the range, as in every range-limit curve so far); those sightings count as missed."""
 SCALE_WALK_PER_M = 0.02**2
 """Variance per metre of the filter's odometer-scale random walk, 1/m (assumed: the slip may change
-by ~2 % per √m as the sand changes; the odometry model keeps it constant along a run, so this only
-keeps the filter from trusting its learnt scale for ever)."""
+by ~2 % per √m as the sand changes; with a constant slip in the odometry model this only keeps the
+filter from trusting its learnt scale for ever). A run whose slip wanders adds the model's own rate,
+:attr:`pipeline.odometry.WheelOdometry.scale_walk_per_m`."""
 CENTROID_SD_PX = 0.5
 """Noise of one marker centroid, px (assumed: a lit face a few pixels across in a compressed webcam
 frame is located to a fraction of a pixel; the CRLB scales with it)."""
@@ -222,7 +224,8 @@ class Traverse:
     led_current_mA
         The beacons' LED drive, mA (the detection table's, and the rendered frames').
     odometry
-        :class:`pipeline.odometry.WheelOdometry` fields to replace (the slip is drawn per run).
+        :class:`pipeline.odometry.WheelOdometry` fields to replace (the slip is drawn per run; e.g.
+        ``{"slip_sd": 0.1, "slip_correlation_m": 5.0}`` for a slip that wanders along the run).
     """
 
     camera: str = "spedal-920"
@@ -268,6 +271,10 @@ class Traverse:
             raise ValueError(f"floor_rms_m: expected >= 0 m, under a quarter of the height, got {self.floor_rms_m!r}")
         if not (math.isfinite(self.dust_extinction_per_m) and self.dust_extinction_per_m >= 0):
             raise ValueError(f"dust_extinction_per_m: expected >= 0 per m, got {self.dust_extinction_per_m!r}")
+        unknown = sorted(set(self.odometry) - {f.name for f in fields(WheelOdometry)})
+        if unknown:
+            raise ValueError(f"odometry: expected fields of pipeline.odometry.WheelOdometry, got {unknown}")
+        WheelOdometry(**self.odometry)
         beacon_design(self.beacon)
         camera_geometry(self.camera)
 
@@ -659,7 +666,10 @@ def simulate(
     detect_at = detections or _TableDetections(t, ring, table, cache)
     steps = np.hypot(*np.diff(truth[:, :2], axis=0).T)
     turns = np.array([math.remainder(a, 2 * math.pi) for a in np.diff(truth[:, 2])])
-    d_hat, turn_hat = odo.report(steps, turns, seed=int(ground.integers(2**32)))
+    odo_seed = int(ground.integers(2**32))
+    d_hat, turn_hat = odo.report(steps, turns, seed=odo_seed)
+    slip = odo.slip_along(steps, seed=odo_seed)  # per step; step i is driven with slip[i - 1]
+    scale_walk = SCALE_WALK_PER_M + odo.scale_walk_per_m  # the filter told how the slip may wander
     x_odo = truth[0].copy()  # both start at the known start pose; the filter learns the odometer's scale
     k_mean, k_sd = scale_prior(LOOSE_SAND["slip"])
     x_ekf, p_ekf = np.array([*truth[0], k_mean]), np.diag([1e-4, 1e-4, 1e-6, k_sd**2])
@@ -668,7 +678,7 @@ def simulate(
         if i:
             x_odo, _ = predict(x_odo, np.zeros((3, 3)), d_hat[i - 1], turn_hat[i - 1], np.zeros((2, 2)))
             q = odo.step_covariance(d_hat[i - 1], bias=False)  # the bias is the filter's scale state
-            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q, scale_walk=SCALE_WALK_PER_M)
+            x_ekf, p_ekf = predict(x_ekf, p_ekf, d_hat[i - 1], turn_hat[i - 1], q, scale_walk=scale_walk)
         found = detect_at(i, sightings(t, ring.fov_rad, ring.d_t_m, truth[i], beacons), rng)
         poses = []
         for candidates in found:  # one detection per frame: the beacon whose pose fits the prediction best
@@ -708,7 +718,7 @@ def simulate(
                 "odometry_error_m": float(np.hypot(*(x_odo[:2] - truth[i, :2]))),
                 "filter_error_m": float(np.hypot(*(x_ekf[:2] - truth[i, :2]))),
                 "fix_error_m": float(np.hypot(fix.x_m - truth[i, 0], fix.y_m - truth[i, 1])) if fix else math.nan,
-                "slip": odo.slip,
+                "slip": float(slip[max(i - 1, 0)]) if slip.size else odo.slip,
             }
         )
     return pd.DataFrame(rows)
@@ -818,7 +828,7 @@ def run(
             filter_final_error_m=("filter_error_m", "last"),
             odometry_max_error_m=("odometry_error_m", "max"),
             odometry_final_error_m=("odometry_error_m", "last"),
-            slip=("slip", "first"),
+            slip=("slip", "mean"),
             gated=("gated", "sum"),
             wrong_side=("wrong_side", "sum"),
         )
@@ -855,6 +865,17 @@ def run(
     _report(out, t, steps, per_run, summary)
     atomic_write_bytes(out / "summary.json", strict_json.dumps(summary, indent=2).encode())
     return summary
+
+
+def _slip_text(t: Traverse) -> str:
+    """How the slip behaves along a run, in words."""
+    odo = WheelOdometry(**{"slip": 0.0, **t.odometry})
+    if not odo.slip_sd:
+        return "constant along it"
+    return (
+        f"changing along it with a standard deviation of {odo.slip_sd:g} about the run's mean over "
+        f"{odo.slip_correlation_m:g} m (1/e correlation)"
+    )
 
 
 def _source_text(detections: dict, t: Traverse) -> str:
@@ -899,7 +920,7 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
             f"Largest beacon spacing that keeps the position error under {summary['spacing']['threshold_m']:g} m: "
             f"{summary['spacing_answer']}.",
             _source_text(summary["detections"], t),
-            "Wheel odometry on loose sand with the slip drawn per run and constant along it; the filter (EKF) "
+            f"Wheel odometry on loose sand with the slip drawn per run, {_slip_text(t)}; the filter (EKF) "
             "learns the odometer's scale from the fixes (a state, with a random walk) and gates every detection "
             f"whose pose lies beyond χ²₃ = {GATE_CHI2:g} of its prediction.",
         ]
@@ -932,7 +953,7 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
     rep.table(
         per_run,
         "Per spacing and seed: fraction of steps with a fix, the filter's and odometry's largest and final "
-        "position errors (m), the run's slip, detections the gate rejected and detections that named another "
+        "position errors (m), the run's mean slip, detections the gate rejected and detections that named another "
         "side than the one facing the camera (a neighbouring side seen obliquely can be a correct one)",
         float_format="{:.3g}",
     )

@@ -82,6 +82,18 @@ def traverse(
             "off: the dark environment's box around each camera-beacon line.",
         ),
     ] = True,
+    slip_sd: Annotated[
+        float,
+        typer.Option(
+            "--slip-sd",
+            help="The wheels' slip wanders along the run with this standard deviation about the run's drawn slip "
+            "(0: constant; pipeline.odometry.LOOSE_SAND: 0-0.15).",
+        ),
+    ] = 0.0,
+    slip_correlation_m: Annotated[
+        float,
+        typer.Option("--slip-correlation-m", help="Distance over which the slip's changes are correlated (1/e), m."),
+    ] = 10.0,
     quick: Annotated[
         bool,
         typer.Option(
@@ -118,6 +130,7 @@ def traverse(
         bend_deg=bend_deg, bend_at_m=bend_at_m, bend_radius_m=bend_radius_m, slope_deg=slope_deg,
         tube_width_m=tube_width_m, **({} if tube_height_m is None else {"tube_height_m": tube_height_m}),
         tube_walls=tube_walls,
+        odometry={"slip_sd": slip_sd, "slip_correlation_m": slip_correlation_m},
         dust_extinction_per_m=0.0 if dust_visibility_m is None else extinction_per_m(dust_visibility_m),
     )  # fmt: skip
     source = detections or tr.DEFAULT_TABLE

@@ -23,6 +23,30 @@ def test_slip_over_counts_by_s_over_one_minus_s_and_the_noise_grows_with_the_roo
         WheelOdometry(slip=1.0)
 
 
+def test_a_wandering_slip_is_an_ornstein_uhlenbeck_process_of_the_stated_sd_and_correlation():
+    """Far from the clip (s̄ = 0.5, σ_s = 0.05): stationary sd σ_s, autocorrelation exp(−Δx/ℓ) at Δx = ℓ and
+    2ℓ, and the odometer's report of each step d / (1 − s) for that step's own slip."""
+    odo = WheelOdometry(slip=0.5, scale_sd=0.0, heading_sd_rad=0.0, slip_sd=0.05, slip_correlation_m=5.0)
+    step, n = 0.25, 200
+    runs = np.array([odo.slip_along(np.full(n, step), seed=k) for k in range(2000)])  # 2000 runs of 50 m
+    z = (runs - 0.5) / 0.05
+    assert z.std() == pytest.approx(1.0, abs=0.02)
+    assert abs(z.mean()) < 0.03
+    for lag_m in (5.0, 10.0):
+        lag = round(lag_m / step)
+        assert np.mean(z[:, :-lag] * z[:, lag:]) == pytest.approx(math.exp(-lag_m / 5.0), abs=0.03)
+    assert odo.scale_walk_per_m == pytest.approx(2 * 0.05**2 / 5.0)
+    d, _ = odo.report(np.full(n, step), np.zeros(n), seed=7)
+    assert d == pytest.approx(step / (1 - odo.slip_along(np.full(n, step), seed=7)), rel=1e-12)
+    steady = WheelOdometry(slip=0.3, scale_sd=0.05, heading_sd_rad=0.02)
+    same = WheelOdometry(slip=0.3, scale_sd=0.05, heading_sd_rad=0.02, slip_correlation_m=3.0)
+    steps = np.full(n, step)
+    assert (steady.slip_along(steps, seed=1) == 0.3).all() and steady.scale_walk_per_m == 0
+    assert np.array_equal(steady.report(steps, np.zeros(n), seed=1)[0], same.report(steps, np.zeros(n), seed=1)[0])
+    with pytest.raises(ValueError, match=r"slip_correlation_m: expected a length > 0 m, got 0.0"):
+        WheelOdometry(slip_sd=0.1, slip_correlation_m=0.0)
+
+
 def test_predict_accumulates_a_straight_drive_as_the_sum_of_its_steps():
     """n steps of d along x with length variance q: x = n d, Var x = n q, and a heading variance h per step
     spreads y by Σ (distance still to go)² h (the heading error of step k moves every later step)."""

@@ -153,6 +153,22 @@ def test_a_traverse_corrects_odometry_at_every_fix(tmp_path):
     assert again["runs"] == summary["runs"]  # same seeds, same numbers
 
 
+def test_a_slip_that_wanders_is_recorded_per_step_and_the_filter_follows_it(tmp_path):
+    """The slip column is each step's slip (its run mean in the summary); told the model's wander, the
+    filter's scale state follows the true scale 1 − s closer than the drawn slip's prior spread does."""
+    t = tr.Traverse(path_m=50.0, odometry={"slip_sd": 0.1, "slip_correlation_m": 5.0})
+    table = tr.DetectionTable.from_summary(tr.DEFAULT_TABLE, t.camera)
+    summary = tr.run(tmp_path, t, spacings_m=(5.0,), seeds=2, threshold_m=1.0, table=table)
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    for seed, run in steps.groupby("seed"):
+        assert run.slip.std() > 0.03  # it wanders
+        assert run.slip.mean() == pytest.approx(pd.DataFrame(summary["runs"]).set_index("seed").slip[seed])
+        tail = run[run.distance_m > 10]  # after the first beacons have taught it
+        assert np.sqrt(np.mean((tail.filter_scale - (1 - tail.slip)) ** 2)) < run.slip.std()
+    with pytest.raises(ValueError, match=r"odometry: expected fields of pipeline.odometry.WheelOdometry, got \['sl"):
+        tr.Traverse(odometry={"slipp": 0.1}).validate()
+
+
 def test_the_spacing_answer_is_the_largest_spacing_under_the_threshold_per_seed():
     runs = pd.DataFrame(
         {"spacing_m": [5, 10, 20] * 2, "seed": [0] * 3 + [1] * 3, "filter_max_error_m": [0.2, 0.8, 1.5, 0.3, 1.2, 0.9]}
@@ -197,6 +213,8 @@ def test_a_table_interpolates_the_measured_fractions():
         (["--rendered", "--slope-deg", "50"], "slope_deg"),
         (["--rendered", "--scheduler", "tcp://127.0.0.1:1"], "scheduler"),
         (["--workers", "0"], "workers"),
+        (["--slip-sd", "-0.1"], "slip_sd"),
+        (["--slip-sd", "0.1", "--slip-correlation-m", "0"], "slip_correlation_m"),
     ],
 )
 def test_bad_input_is_one_line_before_any_work(monkeypatch, tmp_path, args, field):
