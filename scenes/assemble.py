@@ -46,6 +46,7 @@ __all__ = [
     "room_spec",
     "scene_spec",
     "sensor_spec",
+    "surface_reflectance",
     "target_shapes",
     "to_mitsuba",
 ]
@@ -279,13 +280,21 @@ def sensor_spec(scenario: Scenario, *, turned: bool = False) -> dict:
     }
 
 
+def surface_reflectance(scenario: Scenario) -> dict[str, float]:
+    """Diffuse reflectance of the surroundings' ``wall`` and ``floor`` materials: the environment's,
+    or the tube's own where :attr:`~scenes.scenario.Scenario.tube_walls` states one."""
+    walls = scenario.tube_walls
+    if walls is not None and walls.reflectance is not None:
+        return {"wall": walls.reflectance, "floor": walls.reflectance}
+    return {"wall": scenario.env.wall_reflectance, "floor": scenario.env.floor_reflectance}
+
+
 def room_spec(scenario: Scenario) -> dict:
     """The scene of :func:`scene_spec` without the beacon: the room (and its luminous
     ceiling) seen by the same camera; path length that of the ambient light."""
-    env = scenario.env
     return {
         "sensor": sensor_spec(scenario, turned=True),
-        "materials": {"wall": env.wall_reflectance, "floor": env.floor_reflectance},
+        "materials": surface_reflectance(scenario),
         "shapes": environment_shapes(scenario),
         "max_depth": scenario.render.ambient_max_depth,
     }
@@ -301,8 +310,7 @@ def scene_spec(scenario: Scenario) -> dict:
             "housing_white": design.housing_reflectance["white"],
             "housing_black": design.housing_reflectance["black"],
             **face_materials,
-            "wall": env.wall_reflectance,
-            "floor": env.floor_reflectance,
+            **surface_reflectance(scenario),
         },
         "shapes": shapes + environment_shapes(scenario),
         "max_depth": max(settings.led_max_depth, settings.ambient_max_depth if env.has_ambient else 0),

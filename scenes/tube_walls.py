@@ -12,7 +12,9 @@ height varying about its plane as a Gaussian random field over the tube's floor 
 piece (``floor_x_m``, ``floor_y_m``, ``floor_heading_deg`` place the beacon's stretch on the plan).
 The stretch runs :data:`OPEN_END_M` beyond the beacon and the camera and is open there: the light
 the tube beyond would return is left out (in the dark only the LEDs light the walls, and what their
-basalt returns from farther is smaller still). Walls, ceiling and floor are the dark environment's basalt.
+basalt returns from farther is smaller still). Walls, ceiling and floor are the dark environment's
+basalt, or grey of the tube's own ``reflectance`` (a dusty tube: 0.15-0.28 in RELAB's powder spectra,
+as issue 28 reports them, against 0.05-0.10 for fresh basalt; their red slope is not modelled).
 
 Directions are in the scenario's target frame (x out of the lit side, z down; a yaw turns the
 camera from x toward y), so ``axis_deg`` is measured like ``yaw_deg``; left and right are seen
@@ -96,6 +98,8 @@ class TubeWalls:
     floor_x_m, floor_y_m, floor_heading_deg
         Where the beacon's foot lies on the floor plan (m) and the axis's heading there (degrees,
         counter-clockwise seen from above): the stretch's floor is the plan's field there.
+    reflectance
+        Diffuse reflectance of walls, ceiling and floor (grey, in (0, 1)); None: the environment's.
     """
 
     axis_deg: float = 0.0
@@ -109,6 +113,7 @@ class TubeWalls:
     floor_x_m: float = 0.0
     floor_y_m: float = 0.0
     floor_heading_deg: float = 0.0
+    reflectance: float | None = None
 
     def validate(self) -> None:
         """One-line errors naming the field (prefixed ``tube_walls.``)."""
@@ -128,6 +133,8 @@ class TubeWalls:
             )
         if not (isinstance(self.floor_seed, int) and not isinstance(self.floor_seed, bool) and self.floor_seed >= 0):
             raise ValueError(f"tube_walls.floor_seed: expected an integer >= 0, got {self.floor_seed!r}")
+        if self.reflectance is not None and not (_finite(self.reflectance) and 0 < self.reflectance < 1):
+            raise ValueError(f"tube_walls.reflectance: expected a reflectance in (0, 1), got {self.reflectance!r}")
 
     def axis(self) -> NDArray[np.float64]:
         """Unit vector of the axis in the target frame (horizontal)."""
@@ -140,8 +147,12 @@ class TubeWalls:
         return np.array([-math.sin(a), math.cos(a), 0.0])
 
     def to_dict(self) -> dict:
-        """Plain-data form."""
-        return dataclasses.asdict(self)
+        """Plain-data form (``reflectance`` left out when None, so the walls of the environment's
+        basalt keep the form, and the render keys, they had before it existed)."""
+        d = dataclasses.asdict(self)
+        if d["reflectance"] is None:
+            del d["reflectance"]
+        return d
 
     @classmethod
     def coerce(cls, value: TubeWalls | dict | None) -> TubeWalls | None:

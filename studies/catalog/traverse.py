@@ -216,6 +216,9 @@ class Traverse:
         camera stands higher or lower than the beacon by its distance along the tube times the
         slope's tangent, and the robot pitches with the floor), and the floor's roughness (m); the
         defaults are ``scenes/data/tube.toml``'s.
+    wall_reflectance
+        Rendered frames with the tube's walls: their grey diffuse reflectance (None: the dark
+        environment's basalt, 0.07; a dusty tube 0.15-0.28, :mod:`scenes.tube_walls`).
     wander_m
         Amplitude of the robot's sideways wander about the centreline (m), one period per 20 m.
     first_beacon_m
@@ -246,6 +249,7 @@ class Traverse:
     slope_deg: float = 0.0
     floor_rms_m: float = field(default_factory=lambda: tube_defaults()["floor_rms_m"])
     floor_correlation_m: float = field(default_factory=lambda: tube_defaults()["floor_correlation_m"])
+    wall_reflectance: float | None = None
     first_beacon_m: float = 0.0
     led_current_mA: float = 2.0
     odometry: dict = field(default_factory=dict)
@@ -269,6 +273,13 @@ class Traverse:
             raise ValueError(f"slope_deg: expected an angle in (-45, 45) degrees, got {self.slope_deg!r}")
         if not (math.isfinite(self.floor_rms_m) and 0 <= self.floor_rms_m < self.tube_height_m / 4):
             raise ValueError(f"floor_rms_m: expected >= 0 m, under a quarter of the height, got {self.floor_rms_m!r}")
+        if self.wall_reflectance is not None and not (
+            self.tube_walls and math.isfinite(self.wall_reflectance) and 0 < self.wall_reflectance < 1
+        ):
+            raise ValueError(
+                f"wall_reflectance: expected a reflectance in (0, 1) of the tube's walls (with tube_walls), "
+                f"got {self.wall_reflectance!r}"
+            )
         if not (math.isfinite(self.dust_extinction_per_m) and self.dust_extinction_per_m >= 0):
             raise ValueError(f"dust_extinction_per_m: expected >= 0 per m, got {self.dust_extinction_per_m!r}")
         unknown = sorted(set(self.odometry) - {f.name for f in fields(WheelOdometry)})
@@ -303,6 +314,7 @@ class Traverse:
             floor_x_m=beacon_at[0],
             floor_y_m=beacon_at[1],
             floor_heading_deg=round(math.degrees(beacon_at[2]), 6),
+            reflectance=self.wall_reflectance,
         )
 
 
@@ -881,9 +893,10 @@ def _slip_text(t: Traverse) -> str:
 def _source_text(detections: dict, t: Traverse) -> str:
     """Where the report's detections came from, in words."""
     if detections["rendered"]:
+        basalt = "basalt" if t.wall_reflectance is None else f"grey (reflectance {t.wall_reflectance:g})"
         tube = (
-            f"the dark tube's basalt walls, ceiling ({t.tube_height_m:g} m) and rough floor ({t.floor_rms_m:g} m rms, "
-            f"{t.floor_correlation_m:g} m correlation) around each beacon"
+            f"the dark tube's {basalt} walls, ceiling ({t.tube_height_m:g} m) and rough floor ({t.floor_rms_m:g} m "
+            f"rms, {t.floor_correlation_m:g} m correlation) around each beacon"
             if t.tube_walls
             else "the dark environment's box around each camera-beacon line"
         )

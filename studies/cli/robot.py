@@ -82,6 +82,14 @@ def traverse(
             "off: the dark environment's box around each camera-beacon line.",
         ),
     ] = True,
+    wall_reflectance: Annotated[
+        float | None,
+        typer.Option(
+            "--wall-reflectance",
+            help="Grey reflectance of the tube's walls, ceiling and floor in rendered frames (dusty walls 0.15-0.28).",
+            show_default="basalt 0.07",
+        ),
+    ] = None,
     slip_sd: Annotated[
         float,
         typer.Option(
@@ -125,11 +133,13 @@ def traverse(
         raise UsageError("dust-visibility-m: dust acts on rendered frames; add --rendered")
     if slope_deg and not rendered:
         raise UsageError("slope-deg: the slope acts on rendered frames; add --rendered")
+    if wall_reflectance is not None and not rendered:
+        raise UsageError("wall-reflectance: the walls are in rendered frames; add --rendered")
     settings = tr.Traverse(
         camera=camera, cameras_n=cameras_n, radius_m=radius_m, beacon=beacon, path_m=path_m, step_m=step_m,
         bend_deg=bend_deg, bend_at_m=bend_at_m, bend_radius_m=bend_radius_m, slope_deg=slope_deg,
         tube_width_m=tube_width_m, **({} if tube_height_m is None else {"tube_height_m": tube_height_m}),
-        tube_walls=tube_walls,
+        tube_walls=tube_walls, wall_reflectance=wall_reflectance,
         odometry={"slip_sd": slip_sd, "slip_correlation_m": slip_correlation_m},
         dust_extinction_per_m=0.0 if dust_visibility_m is None else extinction_per_m(dust_visibility_m),
     )  # fmt: skip

@@ -14,8 +14,9 @@ from scenes.scenario import Scenario, ScenarioError
 from scenes.tube_walls import TubeWalls, heightfield_mesh, rough_heights
 
 
-def _hit_distance(scenario: Scenario, origin, direction) -> float:
-    """Distance along a ray (beacon frame) to the first surface Mitsuba finds in the scene spec."""
+def _hit(scenario: Scenario, origin, direction) -> tuple[float, float]:
+    """Distance along a ray (beacon frame) to the first surface Mitsuba finds in the scene spec, and
+    that surface's diffuse reflectance as Mitsuba's BSDF there gives it."""
     import mitsuba as mi
 
     select_variant("mono")
@@ -24,7 +25,12 @@ def _hit_distance(scenario: Scenario, origin, direction) -> float:
     scene = mi.load_dict(to_mitsuba(spec, 1))
     ray = mi.Ray3f(mi.Point3f(*map(float, origin)), mi.Vector3f(*map(float, direction)))
     si = scene.ray_intersect(ray)
-    return float(np.asarray(si.t)[0])
+    rho = si.bsdf().eval_diffuse_reflectance(si)
+    return float(np.asarray(si.t)[0]), float(np.asarray(rho).ravel()[0])
+
+
+def _hit_distance(scenario: Scenario, origin, direction) -> float:
+    return _hit(scenario, origin, direction)[0]
 
 
 def test_the_rough_floor_has_the_stated_height_and_correlation_length():
@@ -108,6 +114,21 @@ def test_mitsuba_finds_the_walls_ceiling_and_sloped_floor_where_stated():
     # 3 m along the axis, straight down: the floor has risen by 3 tan(5 deg)
     above = foot + 3.0 * axis
     assert _hit_distance(sc, above, [0.0, 0.0, 1.0]) == pytest.approx(0.5 - 3 * math.tan(math.radians(5)), abs=1e-3)
+
+
+@pytest.mark.parametrize("reflectance", [None, 0.2])
+def test_walls_ceiling_and_floor_reflect_the_tubes_own_reflectance_or_the_environments(reflectance):
+    walls = TubeWalls(axis_deg=-90.0, left_m=0.7, right_m=6.3, floor_rms_m=0.05, reflectance=reflectance)
+    sc = Scenario(side="red", range_m=4.0, tube_walls=walls)
+    expected = 0.07 if reflectance is None else reflectance  # the dark environment's basalt (environments.toml)
+    assert sc.env.wall_reflectance == sc.env.floor_reflectance == 0.07
+    rot = sc.target_to_world()[0]
+    foot = np.array([0.0, 0.0, sc.design.target_height_m - 0.5])
+    for direction in (rot @ walls.right(), -(rot @ walls.right()), [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]):
+        assert _hit(sc, foot, direction)[1] == pytest.approx(expected, rel=1e-6)
+    assert ("reflectance" in walls.to_dict()) == (reflectance is not None)  # absent: the keys of before
+    with pytest.raises(ScenarioError, match=r"^tube_walls.reflectance: expected a reflectance in \(0, 1\)"):
+        Scenario(tube_walls={"reflectance": 1.2})
 
 
 def test_a_camera_outside_the_walls_is_a_one_line_error():
