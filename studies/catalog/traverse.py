@@ -580,7 +580,10 @@ def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) 
     20-80× its thinnest axis (blob-shape and rectification biases, not centroid noise). Gross errors
     (a pose flipped or metres off on the right side) are trimmed as the filter's gate would reject them
     (squared Mahalanobis distance beyond :data:`GATE_CHI2`, repeated until no frame changes side), so
-    the covariance is the inliers'; ``outliers`` counts them per band. A band with fewer than
+    the covariance is the inliers'; ``outliers`` counts them per band and ``median_error_m`` gives the
+    median position error (m) of all its frames (where most frames are gross the trimming cannot tell
+    them from the rest: the covariance is then theirs, wide enough for the filter to ignore them, and
+    this median says so). A band with fewer than
     ``min_frames`` takes the covariance of all bands together; with fewer in all, the errors' mean
     square with a floor of 1 cm and 0.5° (assumed)."""
     errors, ranges = [], []
@@ -619,6 +622,7 @@ def error_covariances(pairs: Sequence[tuple[dict, dict]], min_frames: int = 10) 
                 "high_m": high,
                 "frames": len(inside),
                 "outliers": int((d2 > GATE_CHI2).sum()),
+                "median_error_m": float(np.median(np.hypot(inside[:, 0], inside[:, 1]))) if len(inside) else None,
                 "covariance": cov.tolist(),
             }
         )
@@ -858,7 +862,7 @@ def run(
             "max_range_m": max_range_m if rendered else None,
             "error_bands": [
                 {
-                    **{k: b[k] for k in ("low_m", "high_m", "frames", "outliers")},
+                    **{k: b[k] for k in ("low_m", "high_m", "frames", "outliers", "median_error_m")},
                     "sd": np.sqrt(np.diag(b["covariance"])).tolist(),
                 }
                 for b in bands
@@ -951,6 +955,9 @@ def _report(out: Path, t: Traverse, steps: pd.DataFrame, per_run: pd.DataFrame, 
                         ),
                         "frames": b["frames"],
                         "gross errors": b.get("outliers", 0),
+                        "median error, mm": (
+                            1e3 * b["median_error_m"] if b.get("median_error_m") is not None else math.nan
+                        ),
                         "sd u, mm": 1e3 * b["sd"][0],
                         "sd v, mm": 1e3 * b["sd"][1],
                         "sd heading, °": math.degrees(b["sd"][2]),

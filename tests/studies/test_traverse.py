@@ -251,6 +251,14 @@ def test_error_covariances_are_the_planted_errors_second_moment():
     assert 200 <= bands[1.0]["outliers"] <= 210  # and ~0.1 % of the inliers, beyond the gate by chance
     pooled = np.diag(bands[0.0]["covariance"])  # both bands' inliers: a mixture, between the two
     assert np.all(np.diag(near) < pooled) and np.all(pooled < np.diag(far))
+    # the far band's median position error: Rayleigh-like for its 2-D Gaussian, from its own planted errors
+    planted = [math.hypot(r["u_m"] - r["true_u_m"], r["v_m"]) for _, r in pairs[2000:4000]]
+    assert bands[4.0]["median_error_m"] == pytest.approx(float(np.median(planted)), rel=1e-12)
+    # a band where every frame is 10 m off: nothing to trim against, the covariance is theirs, the median says so
+    lost = [({"scenario": {"side": "red"}}, {**pairs[2000 + i][1], "v_m": 10.0 + 0.1 * i}) for i in range(20)]
+    (far_band,) = [b for b in tr.error_covariances(lost) if b["low_m"] == 4.0]
+    assert far_band["median_error_m"] == pytest.approx(10.95, abs=0.06)
+    assert math.sqrt(far_band["covariance"][1][1]) > 10.0
 
 
 def test_a_rendered_traverse_runs_and_resumes(tmp_path):
