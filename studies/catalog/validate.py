@@ -472,7 +472,9 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
             }
         )
 
-    t6_colour = _colour_reach_note("canon-t6-18mm", prim.side.unique() if len(prim) else ("red",), hsv)
+    # the sides the primary frames showed: the table labels a side a point chose "primary"
+    shown = frame.loc[frame.test == "primary", "side"].unique() if len(prim) else ("red",)
+    t6_colour = _colour_reach_note("canon-t6-18mm", shown, hsv)
     verdict(
         "The DSLR (18 mm) detected the markers up to 5 m and 30°",
         bool(len(prim)) and prim.detected_fraction.min() >= 0.5,
@@ -486,7 +488,7 @@ def conclusions(table, frame, thresholds: str = "study", hsv: dict | None = None
         "pale violet-pink rather than yellow-white",
     )
     det = prim[prim.detected_fraction > 0]
-    tested = set(prim.side) | set(rng.side)
+    tested = set(shown) | set(rng.side)
     overlap = [p for p in (overlapping_colours(hsv) if hsv else []) if tested & set(p.split("/"))]
     evidence = (
         f"colour correct among detections {det.colour_correct_fraction.mean():.2f}" if len(det) else "no detections"
