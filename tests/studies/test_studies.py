@@ -360,3 +360,36 @@ def test_validate_uses_the_studys_per_session_morphology_only_where_it_says_so()
     }
     for camera, range_m in (("canon-t6-10mm", 3.0), ("canon-t6-18mm", 5.0), ("logitech-c270", 10.0)):
         assert "thesis_morphology" not in validate.session_settings(task(camera, range_m), 1)
+
+
+def test_conclusions_name_the_side_a_calibrated_point_chose_for_the_primary_test():
+    """The table shows a point-chosen primary side as "primary"; the verdicts must use the side
+    the frames showed (regression: the colour-reach note was asked for a side called "primary")."""
+    base = {
+        "thresholds": "study", "beacon": "v2", "environment": "dark-room", "weights": "tuned",
+        "rectification": "none", "side_blobs": 2, "core_saturated_fraction_mean": 0.5, "yaw_est_deg": np.nan,
+        "yaw_err_deg": np.nan, "range_est_m": np.nan, "failure": "lost", "side_correct": False, "detected": False,
+        "side_of_test": None, "nominal_yaw_deg": 0.0,
+    }  # fmt: skip
+    frames = pd.DataFrame(
+        [
+            {**base, "test": "primary", "camera": "canon-t6-18mm", "side": "green", "side_of_test": "primary",
+             "nominal_range_m": r}
+            for r in (1.0, 5.0)
+        ]
+        + [{**base, "test": "range", "camera": "logitech-c270", "side": "red", "nominal_range_m": 5.0}]
+    )  # fmt: skip
+    table = validate.validation_table(frames)
+    assert set(table[table.test == "primary"].side) == {"primary"}
+    verdicts = validate.conclusions(table, frames)
+    detected = next(v for v in verdicts if v["conclusion"].startswith("The DSLR (18 mm) detected"))
+    assert detected["simulation"] == "disagree"  # no primary frame detected
+    assert "renders the green LED" in detected["reason"] and "primary LED" not in detected["reason"]
+    # the overlap check tests the shown side too: boxes where green meets blue (and nothing meets red)
+    boxes = {
+        "red": [((0, 200, 200), (5, 255, 255))],
+        "green": [((50, 100, 100), (90, 255, 255))],
+        "blue": [((80, 100, 100), (120, 255, 255))],
+    }
+    colours = next(v for v in validate.conclusions(table, frames, hsv=boxes) if v["conclusion"].startswith("…and"))
+    assert "blue/green" in colours["reason"]
