@@ -283,6 +283,7 @@ def bench(
         ("reuse_vs_rerender", b.reuse_vs_rerender),
         ("frame_vs_memcpy", b.frame_vs_memcpy),
         ("whole_frame_paths", b.whole_frame_paths),
+        ("blob_grouping", b.blob_grouping),
         ("warm_frames", b.warm_frames),
         ("cold_renders", b.cold_renders),
         ("workers_and_dask", b.workers_and_dask),
@@ -316,6 +317,7 @@ def bench(
         "t6_frame_vs_memcpy": details["whole_frame_paths"]["canon-t6-18mm"]["fast_vs_memcpy"],
         "webcam_frame_s": details["whole_frame_paths"]["logitech-c270"]["fast_frame_s"],
         "webcam_frame_reference_s": details["whole_frame_paths"]["logitech-c270"]["reference_frame_s"],
+        "blob_grouping_vs_opencv": details["blob_grouping"]["ratio"],
         "replication_cold_h": details["full_grid_estimate"]["cold_h"],
         "room_background_s": details["cold_renders"]["room_background_s"],
         "equivalence": details["equivalence"],
@@ -370,6 +372,13 @@ def bench(
             f"{w['fast_detect_s']:.2f} s ({w['reference_sensor_s']:.2f} / {w['reference_isp_jpeg_s']:.2f} s)",
             "",
         )
+    blobs = details["blob_grouping"]
+    t.add_row(
+        f"study tracker's blob detection, {blobs['blobs']:,} noise specks: OpenCV's 17 levels / one level",
+        f"{blobs['opencv_s']:.1f} s / {blobs['one_level_s']:.2f} s ({blobs['ratio']:.0f}×, "
+        f"{'identical' if blobs['identical'] else 'KEYPOINTS DIFFER'})",
+        "identical",
+    )
     eq = details["equivalence"]
     for name, c in eq["cameras"].items():
         t.add_row(

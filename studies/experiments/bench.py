@@ -36,7 +36,9 @@ from camera_models.capture import capture
 from camera_models.exposure import manual_exposure
 from camera_models.isp import encode_jpeg
 from pipeline.angles import Intrinsics
+from pipeline.binary_blobs import detect_two_level
 from pipeline.detect import detect
+from pipeline.thesis_tracker import ThesisTrackerSettings, _blob_params, colour_mask
 from scenes.background import render_background
 from scenes.beacon import SIDE_ANGLE_RAD, beacon_design
 from scenes.led import led_for_side
@@ -60,6 +62,7 @@ __all__ = [
     "RECORDED_RUNS",
     "STUDY_MIX",
     "WHOLE_FRAME_CAMERAS",
+    "blob_grouping",
     "cold_renders",
     "equivalence_statistics",
     "frame_vs_memcpy",
@@ -68,6 +71,7 @@ __all__ = [
     "recorded_runs",
     "replication_tables",
     "reuse_vs_rerender",
+    "speckle_mask",
     "study_mix",
     "two_stage_vs_brute_force",
     "variant_ratio",
@@ -809,6 +813,42 @@ def replication_tables(workers: int = 2, template_tasks: int = 8, fit_groups: in
         "fits_s_on_workers": fit_s * groups.ngroups / workers,
         "parent_peak_rss_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "parent_peak_rss_after_templates_MiB": rss_templates,
+    }
+
+
+def speckle_mask(seed: int, size: tuple[int, int], level: int, close: int, erode: int) -> np.ndarray:
+    """The study tracker's inverted, padded mask of a noisy dark frame (V ~ 20 ± 8 codes, spatially
+    correlated over ~1.5 px) at a low V threshold, as its thresholds derived from noisy close-range
+    captures give: specks, clumps and chains, thousands of blobs with the morphology off or
+    turned down."""
+    rng = np.random.default_rng(seed)
+    v = np.clip(rng.normal(20, 6, size) + cv2.GaussianBlur(rng.normal(0, 6, size), (0, 0), 1.5), 0, 255)
+    hsv = np.dstack([np.full(size, 90, np.uint8), np.full(size, 100, np.uint8), v.astype(np.uint8)])
+    settings = ThesisTrackerSettings(close_iterations=close, erode_iterations=erode)
+    mask = colour_mask(hsv, [((0, 0, level), (180, 255, 255))], settings)
+    return cv2.copyMakeBorder(255 - mask, 64, 64, 64, 64, cv2.BORDER_CONSTANT, value=255)
+
+
+def blob_grouping(size: tuple[int, int] = (400, 600), level: int = 22) -> dict:
+    """The study tracker's blob detection on a speckle mask (:func:`speckle_mask`, morphology off):
+    OpenCV's ``SimpleBlobDetector`` (17 threshold levels, grouping quadratic in the blobs) against
+    :func:`pipeline.binary_blobs.detect_two_level` (one level, the same keypoints), s."""
+    image = speckle_mask(0, size, level, 0, 0)
+    params = _blob_params(ThesisTrackerSettings())
+    t0 = time.perf_counter()
+    points, sizes = detect_two_level(image, params)
+    t1 = time.perf_counter()
+    keypoints = cv2.SimpleBlobDetector_create(params).detect(image)
+    t2 = time.perf_counter()
+    same = np.array_equal(points, np.array([k.pt for k in keypoints], np.float32).reshape(-1, 2)) and np.array_equal(
+        sizes, np.array([k.size for k in keypoints], np.float32)
+    )
+    return {
+        "blobs": len(keypoints),
+        "one_level_s": t1 - t0,
+        "opencv_s": t2 - t1,
+        "ratio": (t2 - t1) / (t1 - t0),
+        "identical": bool(same),
     }
 
 
