@@ -226,12 +226,17 @@ def _neighbours(c: BlobCentres, min_dist: float) -> coo_matrix:
         return coo_matrix((n, n))
     tree = cKDTree(c.xy)
     reach = np.maximum(c.radius, min_dist) * (1 + 1e-9) + 1e-9  # a margin; the exact test follows
-    pairs = set(map(tuple, tree.query_pairs(reach.min(), output_type="ndarray")))
-    for i in np.flatnonzero(reach > reach.min()):
-        pairs.update((min(i, j), max(i, j)) for j in tree.query_ball_point(c.xy[i], reach[i]) if j != i)
-    if not pairs:
+    found = [tree.query_pairs(reach.min(), output_type="ndarray")]
+    wide = np.flatnonzero(reach > reach.min())  # blobs whose own radius reaches farther
+    if len(wide):
+        balls = tree.query_ball_point(c.xy[wide], reach[wide])
+        counts = np.fromiter(map(len, balls), np.intp, len(wide))
+        others = np.concatenate([np.asarray(b, np.intp) for b in balls])
+        found.append(np.column_stack([np.repeat(wide, counts), others]))
+    ij = np.sort(np.concatenate(found).reshape(-1, 2), axis=1)
+    ij = np.unique(ij[ij[:, 0] != ij[:, 1]], axis=0)
+    if not len(ij):
         return coo_matrix((n, n))
-    ij = np.array(sorted(pairs))
     d = c.xy[ij[:, 0]] - c.xy[ij[:, 1]]
     dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
     near = ~((dist >= min_dist) & (dist >= c.radius[ij[:, 0]]) & (dist >= c.radius[ij[:, 1]]))
