@@ -52,6 +52,7 @@ from studies.engine.design_search import (
     write_results,
 )
 from studies.engine.report import Report
+from studies.engine.run_log import resumed_seconds
 from studies.engine.sequential import SequentialDesign
 from studies.engine.sweep import Execution
 from studies.engine.tasks import StudyOptions
@@ -300,7 +301,7 @@ def run(
         "infeasible": result.infeasible,
         "front": [{"trial": p.trial, "design": p.design, "metrics": p.metrics} for p in result.front],
         "v2_at_budget": v2,
-        "wall_s": time.perf_counter() - t0,
+        "wall_s": resumed_seconds(out, NAME) + time.perf_counter() - t0,  # with the parts it resumes
     }
     atomic_write_bytes(out / "design.json", strict_json.dumps(summary, indent=2).encode())
     _report(out, summary)

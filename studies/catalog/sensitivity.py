@@ -33,6 +33,7 @@ from studies.engine import strict_json
 from studies.engine.calibration.inputs import InputSpace
 from studies.engine.max_range import estimate_max_range
 from studies.engine.report import Report
+from studies.engine.run_log import resumed_seconds
 from studies.engine.scoring import pose_success
 from studies.engine.sensitivity import emulate, explain, morris, sobol
 from studies.engine.sequential import SequentialDesign
@@ -167,7 +168,7 @@ def run(
         "censored_far_limits": int(outputs.at_least.sum()),
         "outputs": outputs.to_dict("records"),
         "analyses": analyses,
-        "wall_s": time.perf_counter() - t0,
+        "wall_s": resumed_seconds(out, NAME) + time.perf_counter() - t0,  # with the parts it resumes
     }
     atomic_write_bytes(out / "sensitivity.json", strict_json.dumps(summary, indent=2).encode())
     _report(out, summary)

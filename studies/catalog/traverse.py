@@ -84,6 +84,7 @@ from studies.engine import strict_json
 from studies.engine.frame import capture_frame, detect_options, render_batch_key
 from studies.engine.frame_task import FrameTask
 from studies.engine.report import Report
+from studies.engine.run_log import resumed_seconds
 from studies.engine.runner import Progress, no_progress, run_tasks
 
 __all__ = [
@@ -873,7 +874,7 @@ def run(
         "runs": per_run.to_dict("records"),
         "spacing": answer,
         "spacing_answer": spacing_text(answer),
-        "wall_s": time.perf_counter() - t0,
+        "wall_s": resumed_seconds(out, NAME) + time.perf_counter() - t0,  # with the parts it resumes
     }
     out.mkdir(parents=True, exist_ok=True)
     steps.to_parquet(out / "steps.parquet.tmp", index=False)

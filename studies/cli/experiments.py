@@ -41,6 +41,7 @@ from studies.cli.common import (
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine import colour_reach as reach
 from studies.engine import strict_json
+from studies.engine.run_log import timed_part
 from studies.engine.tasks import STUDY_CAMERAS
 from studies.experiments import bench as b
 from studies.experiments import crop_vs_full as cvf
@@ -578,7 +579,10 @@ def sensitivity(
     run_on = execution(workers, scheduler)
     check_render_cache()
     prepare_out_dir(out)
-    summary = analysis.run(out, setting, points=points, calibration=source, seed=seed, quick=quick, execution=run_on)
+    with timed_part(out, analysis.NAME):
+        summary = analysis.run(
+            out, setting, points=points, calibration=source, seed=seed, quick=quick, execution=run_on
+        )
     for a in summary["analyses"].values():
         console.print(a["sentences"][0])
     console.print(f"sensitivity: {summary['wall_s']:.0f} s; wrote {out}/report.html and sensitivity.json")
@@ -682,7 +686,7 @@ def design(
     run_on = execution(workers, scheduler)
     check_render_cache()
     prepare_out_dir(out)
-    with rich_progress("design search", trials, 0) as advance:
+    with rich_progress("design search", trials, 0) as advance, timed_part(out, search_design.NAME):
         try:
             summary = search_design.run(
                 out, target, budget, trials=trials, seed=seed, resume=resume, execution=run_on,

@@ -11,6 +11,7 @@ from scenes.dust import extinction_per_m
 from studies.cli import options as opt
 from studies.cli.common import UsageError, console, execution, out_path, parse_list, rich_progress
 from studies.cli.out_folder import prepare_out_dir
+from studies.engine.run_log import timed_part
 
 __all__ = ["COMMANDS", "traverse"]
 
@@ -153,18 +154,19 @@ def traverse(
         raise UsageError(str(exc).splitlines()[0]) from None
     run_on = execution(workers, scheduler, cache=rendered)
     prepare_out_dir(out)
-    summary = tr.run(
-        out,
-        settings,
-        spacings_m=spacings,
-        seeds=seeds,
-        threshold_m=threshold_m,
-        table=table,
-        progress=rich_progress,
-        rendered=rendered,
-        workers=run_on.workers,
-        scheduler=run_on.scheduler,
-    )
+    with timed_part(out, tr.NAME):
+        summary = tr.run(
+            out,
+            settings,
+            spacings_m=spacings,
+            seeds=seeds,
+            threshold_m=threshold_m,
+            table=table,
+            progress=rich_progress,
+            rendered=rendered,
+            workers=run_on.workers,
+            scheduler=run_on.scheduler,
+        )
     console.print(f"traverse: {summary['spacing_answer']}; {summary['wall_s']:.0f} s; wrote {out}/report.html")
 
 

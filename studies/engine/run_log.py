@@ -18,6 +18,9 @@ Example
 [True, True]
 >>> total_seconds(read_parts(out)) >= 12.5
 True
+>>> _ = record_part(out, "design", 30.0, complete=False)  # a search stopped, then resumed
+>>> resumed_seconds(out, "design")
+30.0
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from pathlib import Path
 from scenes.render_cache import atomic_write_bytes
 from studies.engine import strict_json
 
-__all__ = ["RUNS_FILE", "read_parts", "record_part", "stored_frames", "timed_part", "total_seconds"]
+__all__ = ["RUNS_FILE", "read_parts", "record_part", "resumed_seconds", "stored_frames", "timed_part", "total_seconds"]
 
 RUNS_FILE = "runs.json"
 """File name of the parts record in a command's output folder."""
@@ -91,3 +94,14 @@ def timed_part(out: Path, command: str) -> Iterator[None]:
 def total_seconds(parts: list[dict]) -> float:
     """Wall time of a run made of ``parts``, s (their sum)."""
     return float(sum(p["elapsed_s"] for p in parts))
+
+
+def resumed_seconds(out: Path, command: str) -> float:
+    """Wall time of the interrupted parts of ``command`` in ``out/runs.json`` since its last
+    complete one, s: what a resumed run adds to its own time (0 for a run that starts afresh)."""
+    earlier = 0.0
+    for part in read_parts(out):
+        if part.get("command") != command:
+            continue
+        earlier = 0.0 if part.get("complete") else earlier + float(part["elapsed_s"])
+    return earlier

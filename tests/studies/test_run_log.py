@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from studies.engine.run_log import read_parts, record_part, stored_frames, timed_part, total_seconds
+from studies.engine.run_log import read_parts, record_part, resumed_seconds, stored_frames, timed_part, total_seconds
 
 
 def test_parts_of_a_resumed_run_add_up_and_count_the_stored_frames(tmp_path):
@@ -35,6 +35,18 @@ def test_an_interrupted_part_is_recorded_as_such_and_the_error_propagates(tmp_pa
     with timed_part(tmp_path, "validate"):
         pass
     assert [p["complete"] for p in read_parts(tmp_path)] == [False, True]
+
+
+def test_a_resumed_command_adds_the_interrupted_parts_since_its_last_complete_one(tmp_path):
+    assert resumed_seconds(tmp_path, "design") == 0.0
+    record_part(tmp_path, "design", 100.0, frames=0)  # a search that finished
+    record_part(tmp_path, "design", 30.0, frames=0, complete=False)  # a later one, stopped twice
+    record_part(tmp_path, "sensitivity", 500.0, frames=0, complete=False)  # another command's
+    record_part(tmp_path, "design", 20.0, frames=0, complete=False)
+    assert resumed_seconds(tmp_path, "design") == pytest.approx(50.0)
+    record_part(tmp_path, "design", 5.0, frames=0)  # ended: the next run starts afresh
+    assert resumed_seconds(tmp_path, "design") == 0.0
+    assert resumed_seconds(tmp_path, "sensitivity") == pytest.approx(500.0)
 
 
 def test_the_benchmark_sums_the_recorded_full_studies_only_when_all_finished(tmp_path):
