@@ -57,6 +57,7 @@ __all__ = [
     "WINDOW_OVERHEAD_PX",
     "HsvBox",
     "ThesisTrackerSettings",
+    "blob_detector_params",
     "close_reach",
     "colour_mask",
     "derive_hsv_ranges",
@@ -114,7 +115,7 @@ _TINY = 1e-9
 """OpenCV 5 refuses a minimum of exactly 0 for these filters; 1e-9 passes the same blobs."""
 
 
-def _blob_params(s: ThesisTrackerSettings) -> cv2.SimpleBlobDetector_Params:
+def blob_detector_params(s: ThesisTrackerSettings) -> cv2.SimpleBlobDetector_Params:
     """The study's ``SimpleBlobDetector`` parameters (OpenCV's defaults elsewhere: levels 50-210
     in steps of 10, a blob kept when seen at two or more)."""
     p = cv2.SimpleBlobDetector_Params()
@@ -334,7 +335,7 @@ def thesis_track(
     if bgr is None:
         return TrackResult(None, None, reason, failure=Failure.IMAGE)
     hsv, scale = processed_hsv(bgr, intrinsics, s)
-    params = _blob_params(s)
+    params = blob_detector_params(s)
     counts, all_blobs = {}, []
     first_five = None  # every colour's blobs are counted (what each box saw), the side is the study's
     u0, v0 = crop_origin_px
@@ -348,7 +349,7 @@ def thesis_track(
         uv = points.astype(np.float64) - pad
         uf, vf = full_pixel(uv[:, 0], uv[:, 1], scale)
         blobs = [
-            Blob(float(a) + u0, float(b) + v0, float(np.pi * (size / 2) ** 2), colour)
+            Blob(float(a) + u0, float(b) + v0, np.pi * (float(size) / 2) ** 2, colour)  # float64, as before
             for a, b, size in zip(uf, vf, sizes, strict=True)
         ]
         all_blobs += blobs

@@ -38,7 +38,7 @@ from camera_models.isp import encode_jpeg
 from pipeline.angles import Intrinsics
 from pipeline.binary_blobs import detect_two_level
 from pipeline.detect import detect
-from pipeline.thesis_tracker import ThesisTrackerSettings, _blob_params, colour_mask
+from pipeline.thesis_tracker import ThesisTrackerSettings, blob_detector_params, colour_mask
 from scenes.background import render_background
 from scenes.beacon import SIDE_ANGLE_RAD, beacon_design
 from scenes.led import led_for_side
@@ -834,7 +834,7 @@ def blob_grouping(size: tuple[int, int] = (400, 600), level: int = 22) -> dict:
     OpenCV's ``SimpleBlobDetector`` (17 threshold levels, grouping quadratic in the blobs) against
     :func:`pipeline.binary_blobs.detect_two_level` (one level, the same keypoints), s."""
     image = speckle_mask(0, size, level, 0, 0)
-    params = _blob_params(ThesisTrackerSettings())
+    params = blob_detector_params(ThesisTrackerSettings())
     t0 = time.perf_counter()
     points, sizes = detect_two_level(image, params)
     t1 = time.perf_counter()

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from pipeline.binary_blobs import blob_centres, detect_two_level, threshold_levels
-from pipeline.thesis_tracker import ThesisTrackerSettings, _blob_params
+from pipeline.thesis_tracker import ThesisTrackerSettings, blob_detector_params
 from studies.experiments.bench import speckle_mask
 
 
@@ -36,7 +36,7 @@ def _shapes_mask(rng, size=(160, 200)):
     return img
 
 
-STUDY = _blob_params(ThesisTrackerSettings())
+STUDY = blob_detector_params(ThesisTrackerSettings())
 PARAMS = {
     "study": STUDY,
     "opencv defaults": _params(),
