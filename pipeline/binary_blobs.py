@@ -195,13 +195,11 @@ def detect_two_level(
     lone = [k for k, g in enumerate(keep) if g[2]]
     if lone:  # a lone blob's group is that blob once per level: summed for all at once, in OpenCV's order
         idx = np.array([keep[k][1][0] for k in lone])
-        reps = np.array([len(keep[k][1]) for k in lone])
         xy, conf = c.xy[idx], c.confidence[idx]
         total, norm = np.zeros_like(xy), np.zeros(len(idx))
-        for r in range(int(reps.max())):
-            add = (reps > r)[:, None]
-            total = np.where(add, total + conf[:, None] * xy, total)
-            norm = np.where(add[:, 0], norm + conf, norm)
+        for _ in levels:
+            total = total + conf[:, None] * xy
+            norm = norm + conf
         points[lone] = (total * (1.0 / norm)[:, None]).astype(np.float32)
         sizes[lone] = c.radius[idx].astype(np.float32) * np.float32(2.0)
     for k, (_, members, is_lone) in enumerate(keep):
