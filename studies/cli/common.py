@@ -11,6 +11,7 @@ import os
 import re
 import socket
 import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -41,6 +42,7 @@ __all__ = [
     "physics_points",
     "physics_source",
     "print_table",
+    "progress_lines",
     "rich_progress",
 ]
 
@@ -198,11 +200,60 @@ def parse_list(name: str, text: str | None, convert=str) -> tuple | None:
 
 @contextlib.contextmanager
 def rich_progress(description: str, total: int, done: int) -> Iterator[Callable[[], None]]:
-    """A progress bar with an ETA (a :data:`studies.engine.runner.Progress`)."""
+    """A progress bar with an ETA (a :data:`studies.engine.runner.Progress`); where stderr is no
+    terminal (a log file), :func:`progress_lines` instead."""
+    if not console.is_terminal:
+        with progress_lines(description, total, done, write=console.file.write) as advance:
+            yield advance
+        return
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, console=console, transient=False) as bar:
         task = bar.add_task(description, total=total, completed=done)
         yield lambda: bar.advance(task)
+
+
+@contextlib.contextmanager
+def progress_lines(
+    description: str,
+    total: int,
+    done: int,
+    *,
+    write: Callable[[str], object],
+    every_s: float = 60.0,
+    clock: Callable[[], float] = time.monotonic,
+) -> Iterator[Callable[[], None]]:
+    """Progress for a log: one line at the start, then at most one per ``every_s`` seconds
+    (s) and one at the end, each with the tasks done, the elapsed time and an ETA from this
+    run's own rate (tasks already stored do not count towards it).
+
+    >>> lines, ticks = [], iter(range(0, 100, 10))  # a clock ticking 10 s per reading
+    >>> with progress_lines("frames", 4, 1, write=lines.append, every_s=0.0, clock=ticks.__next__) as advance:
+    ...     advance(); advance(); advance()
+    >>> print("".join(lines), end="")
+    frames: 1/4 stored, 3 to run
+    frames: 2/4 (50 %), 10 s, about 20 s left
+    frames: 3/4 (75 %), 20 s, about 10 s left
+    frames: 4/4 (100 %), 30 s, about 0 s left
+    frames: 4/4 done in 40 s
+    """
+    start = last = clock()
+    count = done
+    write(f"{description}: {done}/{total} stored, {total - done} to run\n")
+
+    def advance() -> None:
+        nonlocal count, last
+        count += 1
+        now = clock()
+        if now - last >= every_s or count == total:
+            last = now
+            rate = (count - done) / max(now - start, 1e-9)
+            write(
+                f"{description}: {count}/{total} ({100 * count / max(total, 1):.0f} %), {now - start:.0f} s, "
+                f"about {(total - count) / rate:.0f} s left\n"
+            )
+
+    yield advance
+    write(f"{description}: {count}/{total} {'done' if count == total else 'stopped'} in {clock() - start:.0f} s\n")
 
 
 def print_table(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:

@@ -465,3 +465,23 @@ def test_machine_columns_are_logged_not_returned(tmp_path):
     assert len(log) == 4 and log[1].endswith(f",0,worker_peak_rss_MiB,{float(os.getpid())!r}")
     assert run_tasks(EDGE_TASKS[:3], tmp_path, edge_task, workers=1) == rows  # stored: nothing logged again
     assert len((tmp_path / MACHINE_LOG).read_text().splitlines()) == 4
+
+
+def test_progress_in_a_log_is_plain_lines(monkeypatch):
+    """Where stderr is a file, not a terminal, a long run's progress is lines a log keeps (rich's
+    bar would show nothing until the end): the start, the count after each task here, the end."""
+    import io
+
+    from rich.console import Console
+
+    from studies.cli import common
+
+    log = io.StringIO()
+    monkeypatch.setattr(common, "console", Console(file=log, force_terminal=False))
+    with common.rich_progress("frames", 3, 1) as advance:
+        advance()
+        advance()
+    lines = log.getvalue().splitlines()
+    assert lines[0] == "frames: 1/3 stored, 2 to run"
+    assert lines[-2].startswith("frames: 3/3 (100 %)")
+    assert lines[-1].startswith("frames: 3/3 done in ")
