@@ -51,6 +51,7 @@ from scenes.led import SIDE_COLOURS
 
 __all__ = [
     "CLOSE_KERNEL",
+    "DENSE_MASK_FRACTION",
     "ERODE_KERNEL",
     "MAX_GROUPS",
     "STUDY_HSV_RANGES",
@@ -255,6 +256,16 @@ measurement on the 2-core machine: ~0.1 ms per window call against ~12 ns per pi
 whole 2592 × 1728 mask); only decides when to process the whole mask instead (same result)."""
 
 
+DENSE_MASK_FRACTION = 1 / 64
+"""Fraction of a mask's pixels set beyond which its whole morphology is computed without
+looking for windows (the same result): labelling a set pixel costs ~0.35-0.45 µs
+(:func:`pipeline.components.components`), the whole mask's close and erosion ~6-18 ns per
+pixel, so beyond about 1/64 of the pixels set the windows cannot pay (assumed from
+measurements on the 2-core machine, 2026-12-06: a T6 half-size mask from thresholds derived
+as validate derives them, 3.6 M of 4.5 M pixels set, took 180-240 ms to label and window
+against 24-31 ms for the whole morphology)."""
+
+
 def colour_mask(hsv: NDArray[np.uint8], boxes: list[HsvBox], s: ThesisTrackerSettings) -> NDArray[np.uint8]:
     """The study's mask of one colour: union of inRange boxes, closed then eroded.
 
@@ -279,10 +290,13 @@ def windowed_morphology(
     s
         The tracker's settings (iterations).
     whole_when_cheaper
-        Process the whole mask instead when the windows would cost more
-        (:data:`WINDOW_OVERHEAD_PX`; the same result; False always uses the windows, as the
+        Process the whole mask instead when the windows would cost more (a mask with
+        :data:`DENSE_MASK_FRACTION` of its pixels set, or windows summing to its size with
+        :data:`WINDOW_OVERHEAD_PX` each; the same result; False always uses the windows, as the
         tests check them).
     """
+    if whole_when_cheaper and cv2.countNonZero(mask) >= DENSE_MASK_FRACTION * mask.size:
+        return _morphology(mask, s)
     windows = mask_windows(mask, s)
     if windows is None:
         return _morphology(mask, s)

@@ -244,3 +244,20 @@ def test_noise_only_dark_frames_and_hsv_images():
     assert thesis_track(img, intr).side == "green"
     assert sum(m.any() for m in masks) > 40
     assert _mismatches(masks) == 0
+
+
+def test_a_dense_mask_is_processed_whole_without_labelling(monkeypatch):
+    """A mask with at least :data:`~pipeline.thesis_tracker.DENSE_MASK_FRACTION` of its pixels
+    set (thresholds that pass a frame's noise) is processed whole without labelling it (the same
+    result); a sparser one is still searched for windows."""
+    step = int(1 / thesis_tracker.DENSE_MASK_FRACTION)
+    dense, sparse = np.zeros((256, 256), np.uint8), np.zeros((256, 256), np.uint8)
+    dense.flat[:: step - 4] = 255
+    sparse.flat[:: step + 4] = 255
+    calls = []
+    searched = thesis_tracker.mask_windows
+    monkeypatch.setattr(thesis_tracker, "mask_windows", lambda m, s: calls.append(m.shape) or searched(m, s))
+    assert np.array_equal(windowed_morphology(dense, SETTINGS), _morphology(dense, SETTINGS))
+    assert calls == []
+    assert np.array_equal(windowed_morphology(sparse, SETTINGS), _morphology(sparse, SETTINGS))
+    assert calls == [(256, 256)]
