@@ -62,6 +62,8 @@ __all__ = [
     "close_reach",
     "colour_mask",
     "derive_hsv_ranges",
+    "hsv_histogram",
+    "hsv_ranges_from_histogram",
     "in_range_mask",
     "mask_windows",
     "morphology_reach",
@@ -424,7 +426,8 @@ def derive_hsv_ranges(
     pixels (V above Otsu's threshold of each image's V channel), or the pixels a person would
     draw the box around (``regions``: the markers' cores), and span the given percentiles of
     their H, S and V, widened by ``margin`` (H, S, V), with V's top at 255. A hue range crossing
-    0/180 (red) is returned as two boxes.
+    0/180 (red) is returned as two boxes. The same as :func:`hsv_ranges_from_histogram` of the
+    images' summed :func:`hsv_histogram`.
 
     Parameters
     ----------
@@ -435,39 +438,82 @@ def derive_hsv_ranges(
     margin
         Widening of the percentile span, HSV units.
     percentiles
-        Lower and upper percentiles of the lit pixels' values.
+        Lower and upper percentiles of the lit pixels' values, %.
     regions
         Optional boolean masks, one per image (its size): the pixels to span instead of Otsu's lit ones.
     """
     if colour not in SIDE_COLOURS:
         raise ValueError(f"colour: expected one of {', '.join(SIDE_COLOURS)}, got {colour!r}")
-    samples = []
+    total = np.zeros((3, 256), np.int64)
     for k, image in enumerate(images):
-        bgr, reason = as_bgr(image)
-        if bgr is None:
-            raise ValueError(f"images[{k}]: {reason}")
-        hsv = cv2.cvtColor(to_uint8(bgr), cv2.COLOR_BGR2HSV)
-        if regions is not None:
-            lit = np.asarray(regions[k], dtype=bool)
-            if lit.shape != hsv.shape[:2]:
-                raise ValueError(f"regions[{k}]: expected a mask of the image's size {hsv.shape[:2]}, got {lit.shape}")
-        else:
-            val = hsv[..., 2]
-            thr, _ = cv2.threshold(val, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-            lit = val > thr
-        if lit.sum() < 5:
-            raise ValueError(f"images[{k}]: no lit pixels found")
-        samples.append(hsv[lit])
-    px = np.concatenate(samples).astype(np.float64)
+        try:
+            total += hsv_histogram(image, None if regions is None else regions[k])
+        except ValueError as exc:
+            message = str(exc)
+            field = "regions" if message.startswith("region:") else "images"
+            raise ValueError(f"{field}[{k}]: {message.removeprefix('region: ')}") from None
+    return hsv_ranges_from_histogram(total, margin, percentiles)
+
+
+def hsv_histogram(image, region=None) -> NDArray[np.int64]:
+    """Counts of the lit pixels' H, S and V values: a (3, 256) array, row 0 H (0-179), 1 S, 2 V.
+
+    The lit pixels are those above Otsu's threshold of the image's V channel, or ``region`` (a
+    boolean mask of the image's size). Histograms of several images add up to that of their pooled
+    pixels, so :func:`derive_hsv_ranges` can be computed image by image, in parallel.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> image = np.zeros((8, 8, 3), np.uint8); image[2:5, 2:5] = (0, 0, 255)  # a red square (BGR)
+    >>> counts = hsv_histogram(image)
+    >>> int(counts[0, 0]), int(counts[1, 255]), int(counts[2, 255])
+    (9, 9, 9)
+    """
+    bgr, reason = as_bgr(image)
+    if bgr is None:
+        raise ValueError(reason)
+    hsv = cv2.cvtColor(to_uint8(bgr), cv2.COLOR_BGR2HSV)
+    if region is not None:
+        lit = np.asarray(region, dtype=bool)
+        if lit.shape != hsv.shape[:2]:
+            raise ValueError(f"region: expected a mask of the image's size {hsv.shape[:2]}, got {lit.shape}")
+    else:
+        val = hsv[..., 2]
+        thr, _ = cv2.threshold(val, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        lit = val > thr
+    if np.count_nonzero(lit) < 5:
+        raise ValueError("no lit pixels found")
+    return np.stack([np.bincount(hsv[..., c][lit], minlength=256) for c in range(3)]).astype(np.int64)
+
+
+def hsv_ranges_from_histogram(
+    counts: NDArray[np.int64],
+    margin: tuple[int, int, int] = (3, 10, 10),
+    percentiles: tuple[float, float] = (1.0, 99.0),
+) -> list[HsvBox]:
+    """:func:`derive_hsv_ranges` from the pooled pixels' :func:`hsv_histogram` (the same boxes).
+
+    Parameters
+    ----------
+    counts
+        (3, 256) counts of H, S and V values.
+    margin
+        Widening of the percentile span, HSV units.
+    percentiles
+        Lower and upper percentiles of the pixels' values, %.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    if counts.shape != (3, 256) or (counts < 0).any() or counts[0].sum() < 5 or counts[0, 180:].any():
+        raise ValueError("counts: expected a (3, 256) histogram of at least 5 pixels with hues 0-179")
     lo_p, hi_p = percentiles
-    hue = px[:, 0]
-    # shift hues by 90 when that makes the span narrower (a red cluster around 0/180)
-    shifted = (hue + 90) % 180
-    use_shift = np.ptp(np.percentile(shifted, [lo_p, hi_p])) < np.ptp(np.percentile(hue, [lo_p, hi_p]))
-    h_lo, h_hi = np.percentile(shifted if use_shift else hue, [lo_p, hi_p])
+    hue = counts[0]
+    shifted = np.roll(hue[:180], 90)  # hue + 90 mod 180: narrower for a red cluster around 0/180
+    use_shift = np.ptp(_percentile_of_counts(shifted, [lo_p, hi_p])) < np.ptp(_percentile_of_counts(hue, [lo_p, hi_p]))
+    h_lo, h_hi = _percentile_of_counts(shifted if use_shift else hue, [lo_p, hi_p])
     h_lo, h_hi = h_lo - margin[0], h_hi + margin[0]
-    s_lo, s_hi = np.percentile(px[:, 1], [lo_p, hi_p]) + np.array([-margin[1], margin[1]])
-    v_lo = np.percentile(px[:, 2], lo_p) - margin[2]
+    s_lo, s_hi = _percentile_of_counts(counts[1], [lo_p, hi_p]) + np.array([-margin[1], margin[1]])
+    v_lo = _percentile_of_counts(counts[2], [lo_p])[0] - margin[2]
     s_lo, s_hi, v_lo = int(max(0, np.floor(s_lo))), int(min(255, np.ceil(s_hi))), int(max(0, np.floor(v_lo)))
     if use_shift:
         h_lo, h_hi = h_lo - 90, h_hi - 90
@@ -480,3 +526,18 @@ def derive_hsv_ranges(
             boxes += [((h_lo, s_lo, v_lo), (179, s_hi, 255)), ((0, s_lo, v_lo), (h_hi - 180, s_hi, 255))]
         return boxes
     return [((h_lo, s_lo, v_lo), (h_hi, s_hi, 255))]
+
+
+def _percentile_of_counts(counts: NDArray[np.int64], q) -> NDArray[np.float64]:
+    """``np.percentile`` (its default, linear method) of the values 0, 1, … counted by ``counts``,
+    without expanding them: the two order statistics around each quantile's position, found in
+    the cumulative counts, interpolated as NumPy does (the same floats)."""
+    cum = np.cumsum(counts)
+    n = int(cum[-1])
+    g = np.true_divide(np.asarray(q, dtype=np.float64), 100) * (n - 1)
+    below = np.floor(g)
+    t = g - below
+    a = np.searchsorted(cum, below, side="right").astype(np.float64)  # sorted value at index below
+    b = np.searchsorted(cum, np.minimum(below + 1, n - 1), side="right").astype(np.float64)
+    diff = b - a
+    return np.where(t >= 0.5, b - diff * (1 - t), a + diff * t)

@@ -33,9 +33,7 @@ the fixed-focus webcams); the report marks the study's headline conclusions agre
 
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +41,7 @@ import pandas as pd
 
 from camera_models.camera import load_camera
 from camera_models.capture import marker_core_saturation, marker_pixels
-from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, derive_hsv_ranges
+from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, hsv_histogram, hsv_ranges_from_histogram
 from scenes.marker_photometry import side_to_centre_flux
 from scenes.render_cache import RenderCache, atomic_write_bytes
 from scenes.scenario import RenderSettings, Scenario
@@ -51,9 +49,10 @@ from studies.catalog import prediction_set
 from studies.catalog.unknowns_search import WEBCAMS
 from studies.engine import strict_json
 from studies.engine.colour_reach import HIGHLIGHTS, LEVELS, reach
-from studies.engine.frame import capture_frame
+from studies.engine.frame import FRAME_VERSION, capture_frame, render_batch_key
 from studies.engine.metrics import wilson_interval
 from studies.engine.report import Report
+from studies.engine.runner import run_tasks
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tables import write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks
@@ -64,6 +63,7 @@ __all__ = [
     "PRIMARY_TESTS",
     "WEIGHT_VARIANTS",
     "conclusions",
+    "core_histogram",
     "default_points",
     "derive_thresholds",
     "overlapping_colours",
@@ -182,7 +182,7 @@ def run(
     """Run every test into ``out``; returns the validation rows.
 
     As the study did, the preliminary test's 150 mm captures set the colour thresholds
-    (:func:`pipeline.thesis_tracker.derive_hsv_ranges`); the range and primary tests are
+    (:func:`derive_thresholds`, the cores' colours pooled over the captures); the range and primary tests are
     then scored with the study's printed thresholds and with these derived ones.
 
     ``calibration``: a history match's ``nroy.csv`` or an unknowns search's ``samples.csv``
@@ -238,7 +238,19 @@ def run(
 
     preliminary = tasks_for({"preliminary"}, None)
     rows = run_frames(preliminary, out, execution, description=f"{NAME} preliminary")
-    derived = _derived_thresholds(out, preliminary)
+    histograms = run_tasks(
+        preliminary,
+        out,
+        core_histogram,
+        version=FRAME_VERSION,
+        workers=execution.workers,
+        scheduler=execution.scheduler,
+        description=f"{NAME} thresholds from the preliminary captures",
+        progress=execution.progress,
+        batch_key=render_batch_key,
+    )
+    derived = derive_thresholds(histograms)
+    atomic_write_bytes(out / "derived_thresholds.json", strict_json.dumps(derived, indent=1).encode())
     later = tasks_for({"range", "primary", "weights"}, {"study": None, "derived": derived})
     rows += run_frames(later, out, execution, description=f"{NAME} range, primary, weights")
     frame = write_tables(out, rows)
@@ -265,38 +277,32 @@ def run(
     return table.to_dict("records")
 
 
-def _derived_thresholds(out: Path, preliminary: list[dict]) -> dict:
-    """:func:`derive_thresholds` of the preliminary tasks, or, when a stopped run already derived them
-    from the same tasks (``derived_thresholds.key``: a digest of the tasks), the stored ones: deriving
-    re-captures every preliminary frame in this process (~30 min for 20 points)."""
-    key = hashlib.sha256(strict_json.dumps(preliminary).encode()).hexdigest()
-    path, key_path = out / "derived_thresholds.json", out / "derived_thresholds.key"
-    if path.is_file() and key_path.is_file() and key_path.read_text().strip() == key:
-        return json.loads(path.read_text())
-    derived = derive_thresholds(preliminary)
-    atomic_write_bytes(path, strict_json.dumps(derived, indent=1).encode())
-    atomic_write_bytes(key_path, key.encode())
-    return derived
+def core_histogram(task: dict) -> list[dict]:
+    """Task function (:func:`studies.engine.runner.run_tasks`): one preliminary capture's
+    :func:`pipeline.thesis_tracker.hsv_histogram` of the five marker cores (true positions, core
+    radii), the pixels a person tuning the thresholds draws the box around; one row with its
+    ``side`` and ``hsv_histogram`` ((3, 256) counts; None when the cores hold no pixel)."""
+    frame = capture_frame(task)
+    try:
+        counts = hsv_histogram(frame.image_bgr, _core_region(frame)).tolist()
+    except ValueError:
+        counts = None
+    return [{"side": task["scenario"]["side"], "hsv_histogram": counts}]
 
 
-def derive_thresholds(preliminary_tasks: list[dict]) -> dict:
+def derive_thresholds(histograms: list[dict]) -> dict:
     """Per colour, HSV boxes from the preliminary captures as a person tuning them would draw them:
-    around the five marker cores of that colour (their true positions and core radii) in every
-    150 mm capture of it (:func:`pipeline.thesis_tracker.derive_hsv_ranges` with those regions)."""
-
+    around the five marker cores of that colour in every 150 mm capture of it
+    (:func:`pipeline.thesis_tracker.hsv_ranges_from_histogram` of the :func:`core_histogram` rows
+    summed; no box for a colour when any of its captures had no core pixels)."""
     out = {}
     for colour in ("red", "green", "blue", "yellow"):
-        images, regions = [], []
-        for t in preliminary_tasks:
-            if t["scenario"]["side"] != colour:
-                continue
-            frame = capture_frame(t)
-            images.append(frame.image_bgr)
-            regions.append(_core_region(frame))
-        try:
-            out[colour] = [[list(lo), list(hi)] for lo, hi in derive_hsv_ranges(images, colour, regions=regions)]
-        except ValueError:
+        counts = [r["hsv_histogram"] for r in histograms if r["side"] == colour]
+        if not counts or any(c is None for c in counts):
             out[colour] = []  # no lit pixels: that colour cannot be thresholded
+            continue
+        boxes = hsv_ranges_from_histogram(np.sum(np.asarray(counts, dtype=np.int64), axis=0))
+        out[colour] = [[list(lo), list(hi)] for lo, hi in boxes]
     return out
 
 

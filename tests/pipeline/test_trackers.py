@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 
 from pipeline.angles import Intrinsics
-from pipeline.thesis_tracker import STUDY_HSV_RANGES, ThesisTrackerSettings, derive_hsv_ranges, thesis_track
+from pipeline.thesis_tracker import (
+    STUDY_HSV_RANGES,
+    ThesisTrackerSettings,
+    _percentile_of_counts,
+    derive_hsv_ranges,
+    hsv_histogram,
+    hsv_ranges_from_histogram,
+    thesis_track,
+)
 from pipeline.tracker import ColourModel, TrackerSettings, calibrate_colours, track
 from scenes.view import camera_geometry
 from tests.helpers.synthetic import draw_markers, hsv_to_bgr, marker_pixels
@@ -291,3 +299,32 @@ def test_derived_boxes_span_the_regions_given_not_the_brightest_pixels():
     assert lo[0] <= 120 <= hi[0]  # Otsu's lit pixels include the glow
     with pytest.raises(ValueError, match=r"regions\[0\]"):
         derive_hsv_ranges([image], "green", regions=[region[:10]])
+
+
+def test_percentiles_of_counts_are_numpys_of_the_values():
+    """The percentiles of a histogram are NumPy's (linear method) of the values it counts, bit for bit."""
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        values = rng.integers(0, int(rng.integers(1, 256)), int(rng.integers(1, 3000)))
+        q = np.concatenate([rng.uniform(0, 100, 6), [0.0, 1.0, 50.0, 99.0, 100.0]])
+        assert np.array_equal(_percentile_of_counts(np.bincount(values, minlength=256), q), np.percentile(values, q))
+
+
+def test_boxes_from_summed_histograms_are_the_pooled_images_boxes():
+    """:func:`derive_hsv_ranges` of several captures equals :func:`hsv_ranges_from_histogram` of their
+    histograms summed (how validate derives them, one capture per task), for hues that wrap (red) and not."""
+    rng = np.random.default_rng(4)
+    for hue in (2, 60, 175):
+        images, regions = [], []
+        for _ in range(3):
+            hsv = np.stack(
+                [(hue + rng.integers(-6, 7, (40, 50))) % 180, rng.integers(120, 256, (40, 50)),
+                 rng.integers(60, 256, (40, 50))], axis=-1
+            ).astype(np.uint8)  # fmt: skip
+            images.append(cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR))
+            regions.append(rng.random((40, 50)) < 0.3)
+        total = sum(hsv_histogram(i, r) for i, r in zip(images, regions, strict=True))
+        assert hsv_ranges_from_histogram(total) == derive_hsv_ranges(images, "red", regions=regions)
+        assert total.sum() == 3 * sum(r.sum() for r in regions)  # every region pixel counted once per channel
+    with pytest.raises(ValueError, match="counts"):
+        hsv_ranges_from_histogram(np.zeros((3, 256), np.int64))

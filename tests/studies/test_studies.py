@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pipeline.thesis_tracker import hsv_ranges_from_histogram
 from studies.catalog import brightness_diffuser, range_limit, replication, unknowns_search, validate, webcam_vs_dslr
 from studies.catalog.unknowns_search import WEBCAMS
 from studies.engine.metrics import wilson_interval
@@ -393,3 +394,19 @@ def test_conclusions_name_the_side_a_calibrated_point_chose_for_the_primary_test
     }
     colours = next(v for v in validate.conclusions(table, frames, hsv=boxes) if v["conclusion"].startswith("…and"))
     assert "blue/green" in colours["reason"]
+
+
+def test_derived_thresholds_pool_the_captures_of_each_colour():
+    """validate's thresholds come from the preliminary captures' core histograms summed per colour;
+    a colour with a capture whose cores held no pixel gets no box, one never captured none either."""
+    rng = np.random.default_rng(6)
+    green = [np.zeros((3, 256), np.int64) for _ in range(2)]
+    for counts in green:
+        counts[0] += np.bincount(rng.integers(55, 66, 400), minlength=256)
+        counts[1] += np.bincount(rng.integers(150, 256, 400), minlength=256)
+        counts[2] += np.bincount(rng.integers(100, 256, 400), minlength=256)
+    rows = [{"side": "green", "hsv_histogram": c.tolist()} for c in green]
+    rows += [{"side": "red", "hsv_histogram": green[0].tolist()}, {"side": "red", "hsv_histogram": None}]
+    derived = validate.derive_thresholds(rows)
+    assert derived["green"] == [[list(lo), list(hi)] for lo, hi in hsv_ranges_from_histogram(green[0] + green[1])]
+    assert derived["red"] == [] and derived["blue"] == [] and derived["yellow"] == []
