@@ -14,6 +14,9 @@ grey surfaces, has no wavelength-sampling noise and costs one channel instead of
 per band. Spectral variants are selected with ``mode="spectral"`` where a material is
 not grey (dyed paper, in the near-field marker stage).
 
+The LLVM backend compiles for one portable target on every AVX2 host
+(:mod:`scenes.llvm_target`), so a seed gives the same frame on every such machine.
+
 Override with ``BEACON_SIM_VARIANT``: a backend (``cuda``, ``llvm``, ``scalar``) or a
 full Mitsuba variant name (``llvm_ad_mono``).
 """
@@ -26,6 +29,8 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+
+from scenes.llvm_target import pin_llvm_target
 
 __all__ = [
     "ENV_OVERRIDE",
@@ -139,6 +144,8 @@ def select_variant(mode: str = "mono") -> VariantChoice:
         variant = forced_variant or _VARIANTS[(backend, mode)]
         _active = VariantChoice(backend, variant, reason)
         log.info("Mitsuba variant %s: %s", variant, reason)
+        if backend == "llvm":
+            log.info("Dr.Jit LLVM target: %s", pin_llvm_target().note)  # the same bytes on every AVX2 host
         threads = os.environ.get(ENV_THREADS, "").strip()
         if threads and backend == "llvm":
             import drjit as dr
