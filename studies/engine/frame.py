@@ -49,6 +49,7 @@ __all__ = [
     "FRAME_VERSION",
     "NOISE_SEED_FIELDS",
     "ROW_FIELDS",
+    "SCORING_FIELDS",
     "CapturedFrame",
     "aligned_radiance",
     "camera_with_overrides",
@@ -184,24 +185,68 @@ def capture_frame(task: FrameTask | dict) -> CapturedFrame:
     return CapturedFrame(scenario, camera, cap, image_bgr)
 
 
+SCORING_FIELDS = ("trackers", "estimators", "thesis_hsv_variants", "thesis_morphology", "tags", "quest_weights",
+                  "rectification")  # fmt: skip
+"""Task fields that change how a frame is scored, not the frame: tasks that differ only in these
+share one capture in a worker (:func:`simulate_frame`)."""
+
+
+@dataclass
+class _ScoredFrame:
+    """One captured frame with what its tasks share: the measures that do not depend on a detector,
+    and the study's tracker's results per setting (filled as tasks ask for them)."""
+
+    frame: CapturedFrame
+    truth_uv: NDArray[np.float64]
+    saturation: list[dict]
+    colours: list[dict]
+    processed: dict  # the study's tracker's processed image per resize
+    near: dict  # (tracker, settings) → near-miss measures
+    tracked: dict  # (tracker, settings, rectification) → track cache of detect()
+
+
+_last_frame: dict[str, _ScoredFrame] = {}  # this process's last frame, by its task's frame fields
+
+
+def _scored_frame(task: FrameTask) -> _ScoredFrame:
+    """The frame of ``task`` (:func:`capture_frame`) with its detector-free measures: the last one
+    this process made when only :data:`SCORING_FIELDS` differ (a weight experiment's six detector
+    variants of one frame follow one another in a render batch), else a new one."""
+    key = json.dumps({k: v for k, v in task.to_dict().items() if k not in SCORING_FIELDS}, sort_keys=True)
+    if key not in _last_frame:
+        _last_frame.clear()  # one frame held at a time
+        frame = capture_frame(task)
+        truth_uv = marker_pixels(frame.camera, frame.scenario)
+        saturation = marker_core_saturation(frame.capture, frame.camera, frame.scenario)
+        colours = marker_colours(frame.image_bgr, truth_uv, saturation, frame.origin)
+        _last_frame[key] = _ScoredFrame(frame, truth_uv, saturation, colours, {}, {}, {})
+    return _last_frame[key]
+
+
 def simulate_frame(task: FrameTask | dict) -> list[dict]:
-    """Simulate one frame task (see module docstring) and score every detector on it."""
+    """Simulate one frame task (see module docstring) and score every detector on it.
+
+    Tasks that differ only in how the frame is scored (:data:`SCORING_FIELDS`) and follow one
+    another in a worker share the capture and the study's tracker's results (the same rows)."""
     t0 = time.perf_counter()
     task = FrameTask.coerce(task)
     clash = sorted(set(task.tags or {}) & ROW_FIELDS)
     if clash:
         raise ValueError(f"tags.{clash[0]}: a row field of every frame; expected another tag name")
-    frame = capture_frame(task)
-    scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
-    truth_uv = marker_pixels(camera, scenario)
+    shared = _scored_frame(task)
+    scenario, camera, cap, image_bgr = (
+        shared.frame.scenario,
+        shared.frame.camera,
+        shared.frame.capture,
+        shared.frame.image_bgr,
+    )
+    truth_uv, saturation, colours = shared.truth_uv, shared.saturation, shared.colours
     truth = {
         "markers_px": truth_uv.tolist(),
         "range_m": scenario.range_m,
         "yaw_deg": scenario.yaw_deg,
         "side": scenario.side,
     }
-    saturation = marker_core_saturation(cap, camera, scenario)
-    colours = marker_colours(image_bgr, truth_uv, saturation, (cap.x0, cap.y0))
     base = {
         **{k: v for k, v in task.scenario.items()},
         **(task.tags or {}),
@@ -225,10 +270,15 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     options = detect_options(task, camera)
     rows = []
     radii = [m["core_radius_px"] for m in saturation]
-    processed: dict = {}  # the study's tracker's processed image, per resize: its threshold variants share it
+    rectification = json.dumps(task.rectification, sort_keys=True)
     for tracker, label, settings in _detectors(task):
-        tracked: dict = {}  # the tracker runs once; each estimator reuses its result
-        near = _mask_measures(tracker, image_bgr, intrinsics, truth_uv, radii, scenario.side, settings, cap, processed)
+        if (tracker, repr(settings)) not in shared.near:
+            shared.near[tracker, repr(settings)] = _mask_measures(
+                tracker, image_bgr, intrinsics, truth_uv, radii, scenario.side, settings, cap, shared.processed
+            )
+        near = shared.near[tracker, repr(settings)]
+        # the tracker runs once per setting and rectification; each estimator reuses its result
+        tracked = shared.tracked.setdefault((tracker, repr(settings), rectification), {})
         for estimator in tuple(ESTIMATORS) if task.estimators is None else task.estimators:
             ev = evaluate_detection(
                 image_bgr,

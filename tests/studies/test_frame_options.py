@@ -178,3 +178,44 @@ def test_further_beacons_draw_their_own_noise_and_leave_every_other_seed_as_it_w
     before = int.from_bytes(hashlib.sha256(json.dumps(what, sort_keys=True).encode()).digest()[:8], "little") >> 1
     assert "others" not in NOISE_SEED_FIELDS and noise_seed(task) == before
     assert noise_seed({**task, "others": [b]}) != before
+
+
+def test_scoring_variants_of_one_frame_share_its_capture_and_give_the_same_rows(monkeypatch, mitsuba_variant):
+    """The weight experiment's detector variants of one frame (weights × rectification) follow one
+    another in a worker: they are captured once and give the rows each gives alone."""
+    from studies.engine import frame
+
+    task = {
+        "scenario": {"beacon": "v2", "side": "red", "range_m": 1.0, "yaw_deg": 10.0, "camera": "canon-t6-18mm",
+                     "environment": "dark", "led_current_mA": 2.0},
+        "render": {"spp": 1, "oversampling": 1, "crop": "target", "near_field_spp": 16},
+        "seed": 0, "trackers": ["thesis"], "estimators": ["thesis"],
+    }  # fmt: skip
+    variants = [
+        {**task, "quest_weights": w, "tags": {"weights": w}, **({"rectification": r} if r else {})}
+        for w in ("tuned", "equal")
+        for r in (None, {"alpha": 1.0})
+    ]
+    captures = []
+    captured = frame.capture_frame
+    monkeypatch.setattr(frame, "capture_frame", lambda t: captures.append(t) or captured(t))
+
+    def rows(t: dict) -> list[dict]:
+        return [
+            {k: v for k, v in r.items() if k not in ("frame_s", "worker_peak_rss_MiB")} for r in frame.simulate_frame(t)
+        ]
+
+    frame._last_frame.clear()
+    shared = [rows(t) for t in variants]
+    assert len(captures) == 1
+    alone = []
+    for t in variants:
+        frame._last_frame.clear()
+        alone.append(rows(t))
+    assert len(captures) == 1 + len(variants)
+    assert shared == alone
+    (tuned, tuned_rectified, equal, _) = (r[0] for r in shared)
+    assert tuned["detected"] and tuned["yaw_est_deg"] != equal["yaw_est_deg"]  # the weights change QUEST's answer
+    assert tuned_rectified["reason"] != tuned["reason"]  # the rectified image is tracked on its own
+    rows({**task, "seed": 1})  # another frame: captured anew
+    assert len(captures) == 2 + len(variants)
