@@ -234,12 +234,8 @@ def simulate_frame(task: FrameTask | dict) -> list[dict]:
     if clash:
         raise ValueError(f"tags.{clash[0]}: a row field of every frame; expected another tag name")
     shared = _scored_frame(task)
-    scenario, camera, cap, image_bgr = (
-        shared.frame.scenario,
-        shared.frame.camera,
-        shared.frame.capture,
-        shared.frame.image_bgr,
-    )
+    frame = shared.frame
+    scenario, camera, cap, image_bgr = frame.scenario, frame.camera, frame.capture, frame.image_bgr
     truth_uv, saturation, colours = shared.truth_uv, shared.saturation, shared.colours
     truth = {
         "markers_px": truth_uv.tolist(),
