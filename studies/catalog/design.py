@@ -5,9 +5,10 @@ in-plane and out-of-plane marker offsets, lit face, the side's LED part where it
 than one) with what a run sets per side (LED drive, foam, paper sheets), and, for an
 interchangeable-lens body, the lens's focal length (:func:`space_for`).
 Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`) of
-one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, best tracker; "≥ the farthest
-range tried" counts as that range), the optical power of one side (five LEDs' radiant flux at the
-drive, :meth:`scenes.led.Led.radiant_flux_W`) and the target's span (:attr:`BeaconParameters.span_mm`).
+one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, or the level the target asks for,
+best tracker; "≥ the farthest range tried" counts as that range), the optical power of one side
+(five LEDs' radiant flux at the drive, :meth:`scenes.led.Led.radiant_flux_W`) and the target's span
+(:attr:`BeaconParameters.span_mm`).
 The search (:func:`studies.engine.design_search.search`: optuna's multivariate TPE, resumable from
 ``out/search.journal``) maximises the far limit and minimises power and span within the user's
 budget (power per side, span), and the report puts the front beside V2 as built (foam + one matched
@@ -51,6 +52,7 @@ from studies.engine.design_search import (
     search,
     write_results,
 )
+from studies.engine.max_range import P_WORKING, check_p_working
 from studies.engine.report import Report
 from studies.engine.run_log import resumed_seconds
 from studies.engine.sequential import SequentialDesign
@@ -129,6 +131,9 @@ class Target:
         Points of the unknowns each design also runs at (``--uncertainty``), and what they are.
     at
         One of :data:`AT`: the far limit scored (``low`` and ``median`` need ``physics``).
+    p_working
+        The probability of a correct pose the far limit stands for (0.5 < p < 1; the engine's
+        :data:`~studies.engine.max_range.P_WORKING` by default).
     """
 
     camera: str
@@ -139,8 +144,10 @@ class Target:
     physics: tuple[dict, ...] = ()
     physics_source: str = ""
     at: str = "nominal"
+    p_working: float = P_WORKING
 
     def __post_init__(self) -> None:
+        check_p_working(self.p_working)
         if not self.yaws_deg or not all(0 <= y <= 90 for y in self.yaws_deg):
             raise ValueError(f"yaws_deg: expected angles in [0, 90], got {list(self.yaws_deg)}")
         if self.at not in AT:
@@ -227,7 +234,10 @@ def evaluate_design(design: dict, target: Target, out: Path, execution: Executio
         out / "evaluations" / f"{beacon}-{options.currents_mA[0]:g}mA-{int(design['foam'])}-{design['paper_sheets']}"
     )
     summary = range_limit.run(
-        run_out, options, execution, design=SequentialDesign(target_relative=0.2, max_range_m=20.0)
+        run_out,
+        options,
+        execution,
+        design=SequentialDesign(target_relative=0.2, max_range_m=20.0, p_working=target.p_working),
     )
     return {
         "far_limit_m": min(scored_far_limit(rec, target.at) for rec in summary["max_range"]),
@@ -323,26 +333,28 @@ COLUMNS = {
 """The report table's columns and their headers (``led`` and ``focal_length_mm`` added when searched)."""
 
 
-def _far(far_limit_m: float) -> str:
-    return f"{far_limit_m:.3g} m" if far_limit_m > 0 else "none (no range reaches P ≥ 0.95)"
+def _far(far_limit_m: float, p_working: float) -> str:
+    return f"{far_limit_m:.3g} m" if far_limit_m > 0 else f"none (no range reaches P ≥ {p_working:g})"
 
 
 def _report(out: Path, summary: dict) -> None:
     t, b, v2 = summary["target"], summary["budget"], summary["v2_at_budget"]
+    level = float(t.get("p_working", P_WORKING))
     yaws = " to ".join(f"{y:g}" for y in sorted({min(t["yaws_deg"]), max(t["yaws_deg"])}))
     rep = Report(f"Design search: the beacon that reaches farthest with {t['camera']} at {yaws}°")
     span = f" and a span under {b['span_mm']:g} mm" if b.get("span_mm") else ""
     lead = [
         f"{summary['evaluations']} designs evaluated ({summary['feasible']} within {b['side_power_mW']:g} mW per "
-        f"side{span}); each a sequential range-limit run of the {t['side']} side.",
+        f"side{span}); each a sequential range-limit run of the {t['side']} side, its far limit where "
+        f"P(correct pose) falls to {level:g}.",
         f"V2 as built at the same budget ({v2['design']['led_current_mA']:.3g} mA, foam + 1 sheet): far limit "
-        f"{_far(v2['metrics']['far_limit_m'])} at {v2['metrics']['side_power_mW']:.3g} mW per side.",
+        f"{_far(v2['metrics']['far_limit_m'], level)} at {v2['metrics']['side_power_mW']:.3g} mW per side.",
     ]
     if summary["front"]:
         best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
         d, m = best["design"], best["metrics"]
         lead.append(
-            f"Farthest on the front: {_far(m['far_limit_m'])} with {d['arm_length_mm']:.0f} mm arms, the centre "
+            f"Farthest on the front: {_far(m['far_limit_m'], level)} with {d['arm_length_mm']:.0f} mm arms, the centre "
             f"marker {d['out_of_plane_mm']:.0f} mm out, {d['lit_face_diameter_mm']:.0f} mm lit faces, "
             f"{d['led_current_mA']:.3g} mA, {'foam + ' if d['foam'] else ''}{d['paper_sheets']} "
             f"sheet{'' if d['paper_sheets'] == 1 else 's'}"

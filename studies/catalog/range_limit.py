@@ -31,7 +31,13 @@ from studies.engine.max_range import (
     works_best_key,
 )
 from studies.engine.report import Report
-from studies.engine.sequential import SequentialDesign, decision_text, design_evidence, run_design
+from studies.engine.sequential import (
+    SequentialDesign,
+    decision_text,
+    design_evidence,
+    run_design,
+    summary_p_working,
+)
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import pose_outcomes, write_tables
 from studies.engine.tasks import StudyOptions, grid_conditions
@@ -170,12 +176,13 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     record says how many frames decided its limits (``decision``; ``far_decided``,
     ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
-    physics = far_limits_at_points(point_rows(frame), GROUP)
+    level = summary_p_working(design)
+    physics = far_limits_at_points(point_rows(frame), GROUP, p_working=level)
     frame = nominal_rows(frame)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
         cam, beacon, side, current, yaw, tracker = key
-        mr = estimate_max_range(g.to_dict("records")).to_dict()
+        mr = estimate_max_range(g.to_dict("records"), p_working=level).to_dict()
         rec = {
             "camera": cam,
             "beacon": beacon,

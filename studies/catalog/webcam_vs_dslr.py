@@ -39,7 +39,13 @@ from studies.engine.max_range import (
 )
 from studies.engine.metrics import bayes_error, confusion_matrix, delta_e_2000, mahalanobis_separability
 from studies.engine.report import Report
-from studies.engine.sequential import SequentialDesign, decision_text, design_evidence, run_design
+from studies.engine.sequential import (
+    SequentialDesign,
+    decision_text,
+    design_evidence,
+    run_design,
+    summary_p_working,
+)
 from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import detection_curve, write_tables
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
@@ -194,13 +200,18 @@ def analyse(frame, design: dict | None = None) -> dict:
     at_points = point_rows(frame)
     frame = nominal_rows(frame)
     keys = ["camera", "beacon", "environment", "led_current_mA", "tracker"]
-    far_physics = far_limits_at_points(at_points[at_points.estimator == "best"], keys) if len(at_points) else {}
+    level = summary_p_working(design)
+    best = at_points[at_points.estimator == "best"] if len(at_points) else at_points
+    far_physics = far_limits_at_points(best, keys, p_working=level) if len(at_points) else {}
     seen = at_points[(at_points.tracker == "best") & (at_points.estimator == "best")] if len(at_points) else at_points
     sep_physics = values_at_points(seen, ["camera", "led_current_mA"], _closest_pair)
     if "nominal_yaw_deg" in frame:
         summary["yaws_deg"] = sorted(float(y) for y in set(frame.nominal_yaw_deg))
     for key, g in frame[frame.estimator == "best"].groupby(keys):
-        rec = {**dict(zip(keys, key, strict=True)), **estimate_max_range(g.to_dict("records")).to_dict()}
+        rec = {
+            **dict(zip(keys, key, strict=True)),
+            **estimate_max_range(g.to_dict("records"), p_working=level).to_dict(),
+        }
         rec.update(
             working_range=working_range_text(rec),
             far_limit=far_limit_text(rec),

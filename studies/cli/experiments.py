@@ -628,6 +628,14 @@ def design(
             "lower end ('low') or the points' median ('median').",
         ),
     ] = "nominal",
+    p_working: Annotated[
+        float,
+        typer.Option(
+            "--p-working",
+            help="The probability of a correct pose the far limit stands for (0.5 < P < 1): the design must be "
+            "right this often at its far limit.",
+        ),
+    ] = 0.95,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the search in --out (to --trials).")] = False,
     quick: Annotated[bool, typer.Option("--quick", help="A coarser range grid per design.")] = False,
     seed: opt.Seed = 0,
@@ -650,6 +658,8 @@ def design(
         raise UsageError(f"at: expected one of {', '.join(search_design.AT)}, got {at!r}")
     if at != "nominal" and uncertainty is None:
         raise UsageError(f"at: {at!r} needs points of the unknowns (--uncertainty N), got none")
+    if not 0.5 < p_working < 1:
+        raise UsageError(f"p-working: expected a probability between 0.5 and 1 (exclusive), got {p_working:g}")
     physics, source = physics_points(uncertainty, physics_from)
     ranges = {p.name: p for p in search_design.SPACE.params}
     least = min(search_design.side_power_mW(side, ranges["led_current_mA"].low, p) for p in led_part_names(side))
@@ -680,7 +690,7 @@ def design(
             raise UsageError(f"focal-length-mm: {exc}") from None
     target = search_design.Target(
         camera=camera, side=side, yaws_deg=yaws, quick=quick, focal_lengths_mm=lenses, physics=physics,
-        physics_source=source, at=at,
+        physics_source=source, at=at, p_working=p_working,
     )  # fmt: skip
     budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
     run_on = execution(workers, scheduler)

@@ -1,5 +1,8 @@
 """Working range: the nearest and farthest ranges where a correct pose has probability ≥ 0.95.
 
+The level is :data:`P_WORKING` (0.95) unless a caller asks for another (``p_working``: a design
+that must work 99 % of the time, or one that may miss one frame in ten); every record states it.
+
 Success is "pose success" (:func:`studies.engine.scoring.pose_success`). It need not fall
 monotonically from the nearest range: near the camera clipped cores lose their colour
 and markers merge. The frames are therefore split at the *peak*, the nominal range with
@@ -8,7 +11,7 @@ fitted on its own:
 
 * **far limit** (``max_range_m``): frames from the peak outward follow a logistic
   fall-off P(r) = 1 / (1 + exp((r − r₅₀)/s)); the far limit is where P = 0.95,
-  r₉₅ = r₅₀ − s·ln 19;
+  r₉₅ = r₅₀ − s·ln 19 (at level p: r₅₀ − s·ln(p/(1 − p)));
 * **near limit** (``near_limit_m``): frames from the nearest range to the peak follow the
   mirror image, a logistic rise; the near limit is where it reaches 0.95.
 
@@ -68,7 +71,9 @@ __all__ = [
     "LN19",
     "PLATEAU_TOL",
     "PROFILE_DROP",
+    "P_WORKING",
     "MaxRange",
+    "check_p_working",
     "estimate_max_range",
     "far_interval_text",
     "far_limit_text",
@@ -94,6 +99,9 @@ COLUMNS = (
 )
 """The row fields the estimate reads (a table can be cut to these before making row dicts)."""
 LN19 = math.log(19.0)
+"""ln(0.95 / 0.05): the logit of :data:`P_WORKING`."""
+P_WORKING = 0.95
+"""The probability of a correct pose a working range needs unless a caller says otherwise."""
 PROFILE_DROP = float(chi2.ppf(0.95, 1)) / 2
 """Log-likelihood drop bounding the 95 % profile-likelihood interval (χ²₁(0.95)/2 ≈ 1.92)."""
 PLATEAU_TOL = 1e-3
@@ -131,6 +139,7 @@ class MaxRange:
     peak_successes: int = 0
     farthest_frames: int = 0
     farthest_successes: int = 0
+    p_working: float = P_WORKING
 
     def to_dict(self) -> dict:
         """JSON-able form, with ``high_open`` / ``near_high_open`` saying that ``high_m`` /
@@ -173,12 +182,18 @@ def _peak(rows: list[dict]) -> float:
 
 
 def profile_loglik(
-    x: np.ndarray, y: np.ndarray, limits: np.ndarray, scale: float, penalised: bool = False
+    x: np.ndarray,
+    y: np.ndarray,
+    limits: np.ndarray,
+    scale: float,
+    penalised: bool = False,
+    *,
+    p_working: float = P_WORKING,
 ) -> np.ndarray:
-    """Profile log-likelihood of the 0.95 point of a logistic fall-off in x.
+    """Profile log-likelihood of the ``p_working`` point of a logistic fall-off in x.
 
-    Model: P(success | x) = 1 / (1 + exp(−((L − x)/s + ln 19))), which is 0.95 at x = L and
-    falls with x. For each limit L of ``limits`` the log-likelihood of the outcomes ``y``
+    Model: P(success | x) = 1 / (1 + exp(−((L − x)/s + logit p))), which is p at x = L and
+    falls with x (p = 0.95: logit p = ln 19). For each limit L of ``limits`` the log-likelihood of the outcomes ``y``
     at ``x`` is maximised over the slope s: first on a log grid from 0.001 to 10 times
     ``scale`` (the smallest slope is a step at the frames' resolution, the largest a flat
     P ≈ 0.95), then by golden-section search between the best grid slope's neighbours.
@@ -191,14 +206,16 @@ def profile_loglik(
     ----------
     x : positions of the frames (range, m, or its negative for a rise); binned to 1 cm.
     y : success of each frame.
-    limits : candidate 0.95 points L, same unit as x.
+    limits : candidate p points L, same unit as x.
     scale : the frames' spread, same unit (sets the slope grid).
     penalised : Firth's penalised log-likelihood instead of the plain one.
+    p_working : the level p whose point L is (0 < p < 1).
 
     Returns
     -------
     The profile (penalised) log-likelihood at each limit (natural log, ≤ 0).
     """
+    offset = LN19 if p_working == P_WORKING else math.log(p_working / (1.0 - p_working))
     xs, inverse = np.unique(np.round(np.asarray(x, float), 2), return_inverse=True)
     k = np.bincount(inverse, weights=np.asarray(y, float))
     n = np.bincount(inverse).astype(float)
@@ -206,7 +223,7 @@ def profile_loglik(
 
     def loglik(lim: np.ndarray, log_s: np.ndarray) -> np.ndarray:
         """Log-likelihood for limits (..., 1) and log slopes broadcast against them."""
-        t = (lim[..., None] - xs) / np.exp(log_s)[..., None] + LN19
+        t = (lim[..., None] - xs) / np.exp(log_s)[..., None] + offset
         ll = -(k * np.logaddexp(0.0, -t) + (n - k) * np.logaddexp(0.0, t)).sum(axis=-1)
         if not penalised:
             return ll
@@ -238,12 +255,12 @@ def profile_loglik(
     return out
 
 
-def _fit_limit(x: np.ndarray, y: np.ndarray, start: float) -> _Limit:
-    """The 0.95 point of a fall-off in x fitted to frames at x ≥ ``start`` (the peak).
+def _fit_limit(x: np.ndarray, y: np.ndarray, start: float, p_working: float) -> _Limit:
+    """The ``p_working`` point of a fall-off in x fitted to frames at x ≥ ``start`` (the peak).
 
     Estimate: maximum likelihood, the middle of the limits within :data:`PLATEAU_TOL` of
     the best likelihood (a plateau under perfect separation); −inf below ``start`` (P <
-    0.95 at the peak), capped at the largest x. Interval: the hull of the plain and the
+    p_working at the peak), capped at the largest x. Interval: the hull of the plain and the
     Firth-penalised profile-likelihood intervals (see the module docstring), widened to
     hold the estimate; −inf when it reaches below ``start``, +inf when it reaches past
     the largest x.
@@ -252,11 +269,14 @@ def _fit_limit(x: np.ndarray, y: np.ndarray, start: float) -> _Limit:
     scale = max(float(np.ptp(x)), 0.1 * abs(end), 0.1)
     pad = 0.25 * scale
     grid = np.linspace(start - pad, end + pad, max(round((end - start + 2 * pad) / scale * 120), 60) + 1)
-    prof = profile_loglik(x, y, grid, scale)
+    prof = profile_loglik(x, y, grid, scale, p_working=p_working)
     plateau = grid[prof >= float(prof.max()) - PLATEAU_TOL]
     estimate = 0.5 * (float(plateau.min()) + float(plateau.max()))
-    ends = [_interval(x, y, grid, scale, prof, penalised=False)]
-    ends.append(_interval(x, y, grid, scale, profile_loglik(x, y, grid, scale, penalised=True), penalised=True))
+    penalised = profile_loglik(x, y, grid, scale, penalised=True, p_working=p_working)
+    ends = [
+        _interval(x, y, grid, scale, prof, False, p_working),
+        _interval(x, y, grid, scale, penalised, True, p_working),
+    ]
     low = min(min(e[0] for e in ends), estimate)
     high = max(max(e[1] for e in ends), estimate)
     return _Limit(
@@ -267,7 +287,7 @@ def _fit_limit(x: np.ndarray, y: np.ndarray, start: float) -> _Limit:
 
 
 def _interval(
-    x: np.ndarray, y: np.ndarray, grid: np.ndarray, scale: float, prof: np.ndarray, penalised: bool
+    x: np.ndarray, y: np.ndarray, grid: np.ndarray, scale: float, prof: np.ndarray, penalised: bool, p_working: float
 ) -> tuple[float, float]:
     """The limits on ``grid`` whose profile ``prof`` lies within :data:`PROFILE_DROP` of its
     maximum, ends refined on a finer grid; ±inf where they reach the grid's ends."""
@@ -278,7 +298,7 @@ def _interval(
     def edge(a: float, b: float) -> float:
         """The last limit inside the interval on a fine grid from a (inside) to b (outside)."""
         fine = np.linspace(a, b, _EDGE_POINTS)
-        inside_fine = profile_loglik(x, y, fine, scale, penalised) >= cut
+        inside_fine = profile_loglik(x, y, fine, scale, penalised, p_working=p_working) >= cut
         return float(fine[np.argmin(inside_fine) - 1]) if not inside_fine.all() else float(b)
 
     low = edge(grid[lo_i], grid[lo_i - 1]) if lo_i > 0 else -math.inf
@@ -286,7 +306,26 @@ def _interval(
     return low, high
 
 
-def estimate_max_range(rows: list[dict], bootstrap: int | None = None, seed: int | None = None) -> MaxRange:
+def check_p_working(p_working: float) -> None:
+    """Fail in one line unless ``p_working`` is a probability in (0.5, 1).
+
+    >>> check_p_working(1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: p_working: expected a probability between 0.5 and 1 (exclusive), got 1.0
+    """
+    if isinstance(p_working, bool) or not isinstance(p_working, int | float) or not 0.5 < p_working < 1:
+        raise ValueError(f"p_working: expected a probability between 0.5 and 1 (exclusive), got {p_working!r}")
+
+
+def _level(rec: Mapping) -> str:
+    """The record's working level as text ("0.95")."""
+    return f"{rec.get('p_working', P_WORKING):g}"
+
+
+def estimate_max_range(
+    rows: list[dict], bootstrap: int | None = None, seed: int | None = None, *, p_working: float = P_WORKING
+) -> MaxRange:
     """Near and far limits of the working range of ``rows`` (frames with ``range_m``).
 
     Parameters
@@ -295,14 +334,16 @@ def estimate_max_range(rows: list[dict], bootstrap: int | None = None, seed: int
         they were drawn for) and the fields of :data:`COLUMNS`.
     bootstrap, seed : accepted for compatibility and ignored: the intervals are profile
         likelihood intervals, not bootstrap ones.
+    p_working : the probability of a correct pose the working range needs (0.5 < p < 1).
 
     Returns
     -------
     :class:`MaxRange` (see the module docstring for how to read it).
     """
     del bootstrap, seed
+    check_p_working(p_working)
     if not rows:
-        return MaxRange(math.nan, math.nan, math.nan, "no frames", 0, 0)
+        return MaxRange(math.nan, math.nan, math.nan, "no frames", 0, 0, p_working=p_working)
     ok = np.array([pose_success(x) for x in rows], dtype=bool)
     nominal = np.array([_nominal_m(x) for x in rows])
     r = np.array([float(x["range_m"]) for x in rows])
@@ -324,9 +365,10 @@ def estimate_max_range(rows: list[dict], bootstrap: int | None = None, seed: int
         peak_successes=int(ok[nominal == start].sum()),
         farthest_frames=int((nominal == farthest).sum()),
         farthest_successes=int(ok[nominal == farthest].sum()),
+        p_working=p_working,
     )
     # far side: a fall-off in r from the peak
-    f = _fit_limit(r[far], ok[far], float(r[far & (nominal == start)].min()))
+    f = _fit_limit(r[far], ok[far], float(r[far & (nominal == start)].min()), p_working)
     r_far = 0.0 if f.estimate == -math.inf else f.estimate
     at_least = bool(r_far > 0 and r_far >= float(r[far].max()) - 1e-9)
     if at_least:
@@ -341,7 +383,7 @@ def estimate_max_range(rows: list[dict], bootstrap: int | None = None, seed: int
     if not near_fail:
         near_est, near_low, near_high = nearest, nearest, nearest
     else:
-        g = _fit_limit(-r[near], ok[near], -float(r[near & (nominal == start)].max()))
+        g = _fit_limit(-r[near], ok[near], -float(r[near & (nominal == start)].max()), p_working)
         near_est = math.nan if g.estimate == -math.inf else -g.estimate
         near_low = 0.0 if g.high == math.inf else -g.high
         near_high = math.inf if g.low == -math.inf else -g.low
@@ -392,7 +434,7 @@ def far_limit_text(rec: Mapping) -> str:
         text += (
             f" (failures between it and {_m(rec['farthest_tested_m'])} m end it; the {frames} at "
             f"{_m(rec['farthest_tested_m'])} m {'was' if n == 1 else 'were all'} correct, too few to show "
-            "P ≥ 0.95 there)"
+            f"P ≥ {_level(rec)} there)"
         )
     return text
 
@@ -432,7 +474,7 @@ def working_range_text(rec: Mapping) -> str:
         return f"none (0 of {rec['frames']} frames correct)"
     if rec["max_range_m"] <= 0:
         best = f"{rec['peak_successes']} of {rec['peak_frames']} frames at {_m(rec['fitted_from_m'])} m"
-        return f"none (fitted P < 0.95 at every range; best: {best})"
+        return f"none (fitted P < {_level(rec)} at every range; best: {best})"
     near = f"≤ {_m(rec['nearest_tested_m'])}" if rec.get("near_at_most") else _m(rec["near_limit_m"])
     return f"{near} m to {far_limit_text(rec)}"
 

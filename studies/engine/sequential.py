@@ -6,6 +6,8 @@ grid (its ranges × ``seeds`` frames) and then adds frames in rounds, each round
 from the fit of the frames so far (:func:`studies.engine.max_range.estimate_max_range`,
 the study's one fit with its profile-likelihood 95 % intervals), until each limit is
 *decided* or the frame budget is spent.
+The level 0.95 below is the design's ``p_working`` (default
+:data:`studies.engine.max_range.P_WORKING`).
 
 **Design units.** One working-range estimate is one *unit*: a set of base conditions
 (everything but the range) whose frames are pooled into one fit, e.g. one camera × beacon
@@ -67,7 +69,7 @@ import numpy as np
 
 from scenes.render_cache import atomic_write_bytes
 from studies.engine import strict_json
-from studies.engine.max_range import estimate_max_range
+from studies.engine.max_range import P_WORKING, check_p_working, estimate_max_range
 from studies.engine.metrics import jeffreys_interval
 from studies.engine.sweep import Execution, run_frames
 from studies.engine.tasks import StudyOptions, frame_task, grid_conditions
@@ -88,6 +90,7 @@ __all__ = [
     "near_status",
     "next_ranges",
     "run_design",
+    "summary_p_working",
 ]
 
 DEFAULT_ROUND_FRAMES = 12
@@ -99,8 +102,6 @@ cannot reach, e.g. a flat P ≈ 0.95, still ends)."""
 MAX_ROUNDS = 200
 """Rounds after which a design stops whatever its budget (a guard; never reached in tests)."""
 _EPS = 1e-9
-P_WORKING = 0.95
-"""The probability of a correct pose a working range needs (:mod:`studies.engine.max_range`)."""
 
 FrameRunner = Callable[..., list[dict]]
 """Runs frame tasks: ``(tasks, out, execution, description=...) -> rows`` in task order
@@ -126,6 +127,8 @@ class SequentialDesign:
     seed : seeds where the spread frames of each round go (the same seed and the same
         finished frames give the same next round).
     near : also decide the near limit (else only the far limit).
+    p_working : the probability of a correct pose a working range needs (0.5 < p < 1;
+        :func:`studies.engine.max_range.estimate_max_range`).
     """
 
     target_width_m: float | None = None
@@ -137,6 +140,7 @@ class SequentialDesign:
     max_range_m: float | None = None
     seed: int = 0
     near: bool = True
+    p_working: float = P_WORKING
 
     def validate(self) -> None:
         """Fail fast with one line naming the bad field."""
@@ -162,6 +166,7 @@ class SequentialDesign:
             raise ValueError(f"max_range_m: expected a range > 0 m, got {self.max_range_m!r}")
         if not isinstance(self.seed, int):
             raise ValueError(f"seed: expected an integer, got {self.seed!r}")
+        check_p_working(self.p_working)
 
     def with_overrides(self, **overrides) -> SequentialDesign:
         """This design with the user's non-None overrides."""
@@ -230,11 +235,13 @@ def far_status(rec: Mapping, design: SequentialDesign, max_range_m: float | None
         k, n = int(rec.get("peak_successes", 0)), int(rec.get("peak_frames", 0))
         peak_high = float(jeffreys_interval(k, n)[2]) if n else 1.0
         below = math.isfinite(high) and high < nearest
-        decided = below or peak_high < P_WORKING
+        level = float(rec.get("p_working", design.p_working))
+        decided = below or peak_high < level
         how = (
-            "no range reaches 0.95" + ("" if below else f" (P ≤ {peak_high:.2f} at the best range, {k} of {n} frames)")
+            f"no range reaches {level:g}"
+            + ("" if below else f" (P ≤ {peak_high:.2f} at the best range, {k} of {n} frames)")
             if decided
-            else "P at the best range may still reach 0.95"
+            else f"P at the best range may still reach {level:g}"
         )
         return LimitStatus(decided, float(rec["fitted_from_m"]), nearest, min(high, farthest), math.inf, how)
     if rec.get("at_least") or not math.isfinite(high):
@@ -397,6 +404,12 @@ class DesignResult:
         }
 
 
+def summary_p_working(summary: Mapping | None) -> float:
+    """The working level of a design's :meth:`DesignResult.summary` (None, or one written before
+    the level could be chosen: :data:`~studies.engine.max_range.P_WORKING`)."""
+    return float(((summary or {}).get("design") or {}).get("p_working", P_WORKING))
+
+
 def best_rows(row: Mapping) -> bool:
     """The rows a design fits: the best tracker's, with the best estimator where rows name one."""
     return row.get("tracker", "best") == "best" and row.get("estimator", "best") == "best"
@@ -521,7 +534,7 @@ def run_design(
                     raise ValueError(f"unit_fields: row of unit {key} matches no unit of the grid")
                 fitted[key].append(row)
         for key in todo:
-            records[key] = estimate_max_range(fitted[key]).to_dict()
+            records[key] = estimate_max_range(fitted[key], p_working=design.p_working).to_dict()
         todo = {}
         for key in units:
             if key in stop:

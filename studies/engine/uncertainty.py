@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from studies.engine.max_range import estimate_max_range
+from studies.engine.max_range import P_WORKING, estimate_max_range
 
 __all__ = [
     "PhysicsInterval",
@@ -158,12 +158,15 @@ def values_at_points(
     return out
 
 
-def far_limits_at_points(rows: pd.DataFrame, group: list[str]) -> dict[tuple, list[float]]:
+def far_limits_at_points(
+    rows: pd.DataFrame, group: list[str], *, p_working: float = P_WORKING
+) -> dict[tuple, list[float]]:
     """Per ``group`` key, the far limit at each point of the unknowns (m; ∞ for "≥ the farthest range
-    tried", 0 where no range works): :func:`studies.engine.max_range.estimate_max_range` of its rows."""
+    tried", 0 where no range works): :func:`studies.engine.max_range.estimate_max_range` of its rows
+    at level ``p_working``."""
 
     def far(g: pd.DataFrame) -> float:
-        mr = estimate_max_range(g.to_dict("records"))
+        mr = estimate_max_range(g.to_dict("records"), p_working=p_working)
         return math.inf if mr.at_least else max(float(mr.max_range_m), 0.0)
 
     return values_at_points(rows, group, far)

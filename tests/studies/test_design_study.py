@@ -87,6 +87,7 @@ def test_v2_and_v1_are_instances_of_the_parametric_beacon(tmp_path):
         (["--camera", "logitech-c270", "--at", "low"], "at"),
         (["--camera", "logitech-c270", "--at", "best", "--uncertainty", "3"], "at"),
         (["--camera", "logitech-c270", "--uncertainty", "0"], "uncertainty"),
+        (["--camera", "logitech-c270", "--p-working", "1"], "p-working"),
     ],
 )
 def test_bad_budgets_are_refused_in_one_line_before_any_work(monkeypatch, tmp_path, args, field):
@@ -196,5 +197,22 @@ def test_a_design_scored_over_the_points_of_the_unknowns_and_a_yaw_range(monkeyp
         assert far["low"] == pytest.approx(truth[0], abs=0.6) and far["median"] == pytest.approx(truth[1], abs=0.6)
         with pytest.raises(ValueError, match=r"at: 'low' needs points of the unknowns"):
             design.Target(camera="logitech-c270", at="low")
+    finally:
+        clear_user_hardware()
+
+
+def test_a_design_is_scored_at_the_working_level_the_target_asks_for(monkeypatch, tmp_path):
+    """Planted fall-off with its midpoint at 7 m: at level p the far limit is 7 − s·ln(p/(1 − p))
+    (0.8: 6.3 m, 0.99: 4.7 m for s = 0.5 m); a level outside (0.5, 1) is refused in one line."""
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda task: 7.0))
+    d = {"arm_length_mm": 70.0, "out_of_plane_mm": 46.0, "lit_face_diameter_mm": 12.0, "led_current_mA": 2.0,
+         "foam": True, "paper_sheets": 1}  # fmt: skip
+    try:
+        for p in (0.8, 0.99):
+            target = design.Target(camera="logitech-c270", yaws_deg=(0.0,), quick=True, p_working=p)
+            far = design.evaluate_design(d, target, tmp_path)["far_limit_m"]  # one beacon, its frames shared
+            assert far == pytest.approx(7.0 - FALL_OFF_M * math.log(p / (1 - p)), abs=0.5)
+        with pytest.raises(ValueError, match=r"^p_working: expected a probability between 0.5 and 1"):
+            design.Target(camera="logitech-c270", p_working=0.3)
     finally:
         clear_user_hardware()

@@ -224,3 +224,35 @@ def test_failure_causes():
     assert failure_cause({**base, "failure": "no-fit", "side_blobs": 9}) == "false blobs"
     assert failure_cause({**base, "failure": "no-blobs"}) == "signal-to-noise"
     assert failure_cause({**base, "detected": True, "side_correct": False}) == "colour"
+
+
+@pytest.mark.parametrize("p_working", [0.8, 0.99])
+def test_recovers_the_far_limit_at_another_working_level(p_working):
+    """At level p the far limit is where the fall-off crosses p, r₅₀ − s·logit p (0.99: nearer than
+    the 0.95 point, 0.8: farther); the record states its level and its words use it."""
+    r50, s = 8.0, 0.6
+    truth = r50 - s * math.log(p_working / (1 - p_working))
+    rows = _frames(r50, s, np.arange(2, 14.01, 0.5), 40)
+    result = estimate_max_range(rows, p_working=p_working)
+    assert result.low_m <= truth <= result.high_m and result.max_range_m == pytest.approx(truth, abs=0.5)
+    assert (result.max_range_m < estimate_max_range(rows).max_range_m) == (p_working > 0.95)
+    assert result.to_dict()["p_working"] == p_working
+    none = estimate_max_range(_counts({2.0: (1, 3), 4.0: (0, 3)}), p_working=p_working).to_dict()
+    assert f"fitted P < {p_working:g} at every range" in working_range_text(none)
+    with pytest.raises(ValueError, match=r"^p_working: expected a probability between 0.5 and 1"):
+        estimate_max_range(rows, p_working=1.0)
+
+
+def test_the_profile_at_another_level_matches_a_direct_maximisation():
+    rows = _frames(6.0, 0.7, np.arange(2.0, 10.01, 1.0), 8, seed=12)
+    x = np.array([r["range_m"] for r in rows])
+    y = np.array([r["detected"] for r in rows], dtype=bool)
+    limits = np.array([4.0, 5.0])
+    for lim, value in zip(limits, profile_loglik(x, y, limits, float(np.ptp(x)), p_working=0.9), strict=True):
+
+        def loglik(log_s, lim=lim):
+            p = 1 / (1 + np.exp(-((lim - x) / np.exp(log_s) + math.log(9))))
+            return float(np.sum(np.where(y, np.log(p), np.log1p(-p))))
+
+        best = minimize_scalar(lambda t: -loglik(t), bounds=(-4, 3), method="bounded")
+        assert value == pytest.approx(-best.fun, abs=1e-4)

@@ -27,6 +27,7 @@ from studies.engine.sequential import (
     far_status,
     next_ranges,
     run_design,
+    summary_p_working,
 )
 from studies.engine.tasks import StudyOptions, frame_tasks, grid_conditions
 
@@ -133,6 +134,8 @@ def test_candidate_ranges_refine_the_coarse_grid_and_reach_the_stated_maximum():
         ("round_frames", 1),
         ("refine", 0),
         ("max_range_m", -3.0),
+        ("p_working", 0.5),
+        ("p_working", 1.0),
     ],
 )
 def test_bad_settings_are_refused_in_one_line_naming_the_field(field, value):
@@ -328,3 +331,15 @@ def test_no_working_range_is_decided_when_the_best_range_is_surely_below_095(suc
     assert status.decided is decided
     if decided:
         assert status.how == "no range reaches 0.95 (P ≤ 0.89 at the best range, 132 of 157 frames)"
+
+
+def test_a_design_at_another_working_level_decides_that_levels_limit():
+    """With ``p_working`` 0.8 the design places its frames around, and its interval holds, the 0.8
+    point of the fall-off (r₅₀ − s·ln 4 = 9.31 m, beyond the 0.95 point 8.53 m); its summary says the level."""
+    design = SequentialDesign(target_width_m=1.0, budget_frames=600, p_working=0.8)
+    result = run_design("fake", OPTIONS, design, SCRATCH, UNIT, frames=in_memory())
+    rec = estimate_max_range([r for r in result.rows], p_working=0.8).to_dict()
+    truth = R50 - SLOPE * math.log(4.0)
+    assert rec["low_m"] <= truth <= rec["high_m"] and rec["high_m"] - rec["low_m"] <= 1.0 + 1e-9
+    assert not rec["low_m"] <= TRUE_FAR <= rec["high_m"]  # not the 0.95 point
+    assert summary_p_working(result.summary()) == 0.8 and summary_p_working(None) == 0.95
