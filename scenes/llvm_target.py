@@ -111,11 +111,11 @@ def pin_llvm_target(vector_width: int = PINNED_VECTOR_WIDTH) -> LlvmTarget:
     """
     try:
         lib = _core()
-        cpu, features, width = _current(lib) if lib is not None else ("", "", 0)
-    except AttributeError:  # a Dr.Jit without these functions
-        lib, cpu, features, width = None, "", "", 0
-    if lib is None:
-        return LlvmTarget(cpu, features, width, False, "Dr.Jit's LLVM target cannot be set here: native code")
+        if lib is None:
+            raise AttributeError("libdrjit-core")
+        cpu, features, width = _current(lib)
+    except AttributeError:  # no library, or one without these functions
+        return LlvmTarget("", "", 0, False, "Dr.Jit's LLVM target cannot be read here: native code")
     flags = [f for f in features.split(",") if f]
     if "+avx2" not in flags or "+fma" not in flags:
         note = (
@@ -123,7 +123,10 @@ def pin_llvm_target(vector_width: int = PINNED_VECTOR_WIDTH) -> LlvmTarget:
         )
         return LlvmTarget(cpu, features, width, False, note)
     portable = ",".join("-" + f[1:] if f.startswith("+avx512") else f for f in flags)
-    set_llvm_target(cpu, portable, vector_width)
+    try:
+        set_llvm_target(cpu, portable, vector_width)
+    except AttributeError:
+        return LlvmTarget(cpu, features, width, False, "Dr.Jit's LLVM target cannot be set here: native code")
     cpu, features, width = _current(lib)
     note = f"{cpu}, AVX2 without AVX-512, {width} lanes: the same kernels on every AVX2 host"
     return LlvmTarget(cpu, features, width, width == vector_width, note)
