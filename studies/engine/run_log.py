@@ -1,10 +1,12 @@
 """A command's wall time, kept beside its outputs so a resumed run's parts add up.
 
 Every study, ``validate`` and the main job append one *part* to ``<out>/runs.json`` when
-they finish: when it ended (UTC), its wall time and the frames stored in the output folder
-at that moment. A run cut by a session end and resumed has two parts; its time is their
-sum. ``beacon-sim bench`` reads these records (it cannot re-run hours of studies); they
-measure the machine, so they are kept out of the result tables, which stay deterministic.
+they finish: when it ended (UTC), its wall time, the frames stored in the output folder
+at that moment and the machine (:func:`host`: its CPU, cores and vector extensions, which
+decide its times and, before the LLVM target was pinned, a render's last bits). A run cut by
+a session end and resumed has two parts; its time is their sum. ``beacon-sim bench`` reads
+these records (it cannot re-run hours of studies); they measure the machine, so they are kept
+out of the result tables, which stay deterministic.
 
 Example
 -------
@@ -26,6 +28,8 @@ True
 from __future__ import annotations
 
 import json
+import os
+import platform
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -34,10 +38,44 @@ from pathlib import Path
 from scenes.render_cache import atomic_write_bytes
 from studies.engine import strict_json
 
-__all__ = ["RUNS_FILE", "read_parts", "record_part", "resumed_seconds", "stored_frames", "timed_part", "total_seconds"]
+__all__ = [
+    "RUNS_FILE",
+    "host",
+    "read_parts",
+    "record_part",
+    "resumed_seconds",
+    "stored_frames",
+    "timed_part",
+    "total_seconds",
+]
 
 RUNS_FILE = "runs.json"
 """File name of the parts record in a command's output folder."""
+
+
+def host(cpuinfo: str | None = None) -> dict:
+    """The machine: CPU model, logical CPUs, and whether it has AVX2 and AVX-512 (from
+    ``/proc/cpuinfo``, or the ``cpuinfo`` text given; elsewhere the platform's processor name).
+
+    >>> host("flags : sse avx avx2 fma")["avx2"], host("flags : sse avx avx2 fma")["avx512"]
+    (True, False)
+    """
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            cpuinfo = ""
+    fields = {}
+    for line in cpuinfo.splitlines():
+        name, _, value = line.partition(":")
+        fields.setdefault(name.strip(), value.strip())
+    flags = set(fields.get("flags", "").split())
+    return {
+        "cpu": fields.get("model name") or platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "avx2": "avx2" in flags,
+        "avx512": "avx512f" in flags,
+    }
 
 
 def stored_frames(out: Path) -> int:
@@ -71,6 +109,7 @@ def record_part(out: Path, command: str, elapsed_s: float, frames: int | None = 
         "elapsed_s": round(float(elapsed_s), 1),
         "frames": stored_frames(out) if frames is None else int(frames),
         "complete": bool(complete),
+        "host": host(),
     }
     parts = [*read_parts(out), part]
     Path(out).mkdir(parents=True, exist_ok=True)

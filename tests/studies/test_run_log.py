@@ -3,10 +3,19 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
-from studies.engine.run_log import read_parts, record_part, resumed_seconds, stored_frames, timed_part, total_seconds
+from studies.engine.run_log import (
+    host,
+    read_parts,
+    record_part,
+    resumed_seconds,
+    stored_frames,
+    timed_part,
+    total_seconds,
+)
 
 
 def test_parts_of_a_resumed_run_add_up_and_count_the_stored_frames(tmp_path):
@@ -21,6 +30,14 @@ def test_parts_of_a_resumed_run_add_up_and_count_the_stored_frames(tmp_path):
     parts = read_parts(tmp_path)
     assert parts == [first, second] and first["frames"] == 6 and second["frames"] == 7
     assert total_seconds(parts) == pytest.approx(61.2 + 30.0)  # stored to 0.1 s
+    assert first["host"]["cpus"] == os.cpu_count() and isinstance(first["host"]["cpu"], str)
+
+
+def test_the_host_is_read_from_the_cpus_description():
+    """An AVX-512 host is told apart (its native LLVM width rendered other bytes before the pin)."""
+    text = "processor\t: 0\nmodel name\t: Intel Xeon\nflags\t\t: sse avx avx2 fma avx512f\n\nprocessor\t: 1\n"
+    assert host(text) | {"cpus": 0} == {"cpu": "Intel Xeon", "cpus": 0, "avx2": True, "avx512": True}
+    assert host("model name : AMD EPYC\nflags : sse avx avx2 fma\n")["avx512"] is False
 
 
 def test_a_runs_file_without_a_list_of_parts_is_refused(tmp_path):
