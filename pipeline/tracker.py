@@ -38,7 +38,9 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 
+import colour as colour_science
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -50,8 +52,9 @@ from pipeline.failures import Failure
 from pipeline.image_io import as_bgr, to_float
 from pipeline.markers import Blob, TrackResult, cross_candidates_many
 from pipeline.pnp import solve_pnp
+from scenes import spectra
 from scenes.beacon import BeaconDesign, beacon_design
-from scenes.led import SIDE_COLOURS
+from scenes.led import LED, SIDE_COLOURS
 
 __all__ = [
     "DEFAULT_CHROMA",
@@ -63,6 +66,7 @@ __all__ = [
     "calibrate_colours",
     "cross_dimensions",
     "find_blobs",
+    "ideal_chroma",
     "noise_threshold",
     "rms_lower_bounds",
     "srgb_to_linear",
@@ -76,9 +80,29 @@ DEFAULT_CHROMA = {
     "blue": (0.0, 0.0333),
     "yellow": (0.8361, 0.1639),
 }
-"""(r, g) chromaticity of each LED's spectrum (``scenes.led``) through the CIE 1931 observer
-into linear sRGB, negatives clipped: what an ideal sRGB camera would record. Real cameras
-differ (crosstalk, white balance); calibrate with :func:`calibrate_colours`."""
+"""(r, g) chromaticity of each default LED's spectrum (``scenes.led``) through the CIE 1931
+observer into linear sRGB, negatives clipped (:func:`ideal_chroma`): what an ideal sRGB camera
+would record. Real cameras differ (crosstalk, white balance); calibrate with
+:func:`calibrate_colours`."""
+
+
+@lru_cache(maxsize=64)
+def ideal_chroma(led: LED) -> tuple[float, float]:
+    """(r, g) = (R, G)/(R + G + B) an ideal sRGB camera records for the LED's light: its spectrum
+    (:attr:`scenes.led.LED.spectral_shape`) through the CIE 1931 2° observer to XYZ, to linear sRGB
+    (IEC 61966-2-1 primaries and D65 white), negatives clipped; rounded to 4 decimals, as
+    :data:`DEFAULT_CHROMA` tabulates the default parts.
+
+    >>> from scenes.led import led_for_side
+    >>> ideal_chroma(led_for_side("yellow"))
+    (0.8361, 0.1639)
+    """
+    cmfs = spectra.cie1931_cmfs().values
+    xyz = spectra.integrate_nm(led.spectral_shape[:, None] * cmfs, axis=0)
+    srgb = colour_science.RGB_COLOURSPACES["sRGB"]
+    rgb = np.clip(colour_science.XYZ_to_RGB(xyz, srgb, apply_cctf_encoding=False), 0.0, None)
+    r, g = rgb[:2] / rgb.sum()
+    return round(float(r), 4), round(float(g), 4)
 
 
 def srgb_to_linear(values: NDArray) -> NDArray:
@@ -108,8 +132,20 @@ class ColourModel:
     @classmethod
     def default(cls) -> ColourModel:
         """The ideal-sRGB references of :data:`DEFAULT_CHROMA` with a loose 0.1 spread."""
+        return cls._ideal(dict(DEFAULT_CHROMA))
+
+    @classmethod
+    def for_beacon(cls, name: str) -> ColourModel:
+        """The ideal-sRGB references (:func:`ideal_chroma`) of the beacon's own LEDs, each side's part at
+        its dominant wavelength (:meth:`scenes.beacon.BeaconDesign.led`), with the loose 0.1 spread of
+        :meth:`default`; for a beacon of the default parts at their datasheet colours, :meth:`default`."""
+        design = beacon_design(name)
+        return cls._ideal({side: ideal_chroma(design.led(side)) for side in SIDE_COLOURS})
+
+    @classmethod
+    def _ideal(cls, means: dict[str, tuple[float, float]]) -> ColourModel:
         cov = 0.1**2 * np.eye(2)
-        return cls(dict(DEFAULT_CHROMA), {c: cov for c in DEFAULT_CHROMA}, max_distance=4.0)
+        return cls(means, {c: cov for c in means}, max_distance=4.0)
 
     def classify(self, chroma: tuple[float, float] | None) -> tuple[str | None, float]:
         """Nearest colour and its Mahalanobis distance, or (None, distance) when too far."""
@@ -140,7 +176,7 @@ class TrackerSettings:
     Attributes
     ----------
     colour_model
-        Chromaticity references; None uses :meth:`ColourModel.default`.
+        Chromaticity references; None uses the beacon's (:meth:`ColourModel.for_beacon`).
     beacon
         Target design for the geometric fit.
     threshold_sigma
@@ -186,7 +222,7 @@ class TrackerSettings:
 
     def model(self) -> ColourModel:
         """The colour model in use."""
-        return self.colour_model or ColourModel.default()
+        return self.colour_model or ColourModel.for_beacon(self.beacon)
 
 
 @dataclass

@@ -17,6 +17,7 @@ between the two and documents it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -25,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from scenes.hardware import HardwareFile, hardware_names, hardware_source
-from scenes.led import LED, SIDE_COLOURS, led_for_side, led_part
+from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_for_side, led_part
 from scenes.sourced import DataFileError, Fields, loads_sourced
 
 __all__ = [
@@ -88,6 +89,9 @@ class BeaconDesign:
     led_parts: tuple[tuple[str, str], ...] = ()
     """(side, part name) of the sides whose LEDs are not their colour's default part
     (:func:`scenes.led.led_part`); the file's ``[leds]`` table."""
+    led_dominant_nm: tuple[tuple[str, float], ...] = ()
+    """(side, dominant wavelength, nm) of the sides whose LEDs are given another colour within their
+    colour's band (:data:`scenes.led.HUE_BANDS_NM`); the file's ``[dominant_wavelength_nm]`` table."""
 
     def __post_init__(self) -> None:
         for finish, t in self.housing_transmittance.items():
@@ -105,9 +109,14 @@ class BeaconDesign:
         return math.pi * (0.5 * self.lit_face_diameter_m) ** 2
 
     def led(self, side: str) -> LED:
-        """The LED part of a side: the one the file names (``[leds]``), else the colour's default."""
+        """The LED part of a side: the one the file names (``[leds]``), else the colour's default; at
+        the dominant wavelength the file gives the side (``[dominant_wavelength_nm]``), if any, with the
+        part's other figures (its luminous intensity bin included: assumed, as datasheets bin
+        intensity and wavelength apart)."""
         named = dict(self.led_parts).get(side)
-        return led_for_side(side) if named is None else led_part(named, side)
+        led = led_for_side(side) if named is None else led_part(named, side)
+        hue = dict(self.led_dominant_nm).get(side)
+        return led if hue is None else dataclasses.replace(led, dominant_wavelength_nm=hue)
 
     def marker(self, marker_id: int) -> Marker:
         """The marker with the study's number ``marker_id`` (1-5)."""
@@ -220,6 +229,7 @@ def _design_from_source(source: HardwareFile) -> BeaconDesign:
         housing_reflectance=r,
         housing_transmittance=t,
         led_parts=_led_parts(f),
+        led_dominant_nm=_led_hues(f),
     )
     f.check_known()
     return design
@@ -243,6 +253,23 @@ def _led_parts(f: Fields) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
+def _led_hues(f: Fields) -> tuple[tuple[str, float], ...]:
+    """The ``[dominant_wavelength_nm]`` table (side = nm), checked: a side colour, a wavelength in its band."""
+    if not f.has("dominant_wavelength_nm"):
+        return ()
+    table = f.table("dominant_wavelength_nm")
+    out = []
+    for side in sorted(table.values):
+        if side not in SIDE_COLOURS:
+            raise DataFileError(
+                f"{f.file}: dominant_wavelength_nm.{side}: expected a side colour ({', '.join(SIDE_COLOURS)})"
+            )
+        low, high = HUE_BANDS_NM[side]
+        why = f"the band of {side} 5 mm lamps, scenes.led.HUE_BANDS_NM"
+        out.append((side, table.number(side, minimum=low, maximum=high, reason=why)))
+    return tuple(out)
+
+
 def beacon_template(like: str = "v2") -> str:
     """A complete beacon file to copy and edit: the beacon ``like``'s file, named ``my-beacon``."""
     lines = hardware_source("beacon", like).text.splitlines()
@@ -251,7 +278,9 @@ def beacon_template(like: str = "v2") -> str:
         "# Edit every value for your beacon; give each number a `source` or an `assumed` note.",
         "# Use it with --beacon-file FILE. Each side's LED is its colour's default part unless a",
         '# [leds] table names another of that colour (e.g. green = "cree-c503t-gan"; the parts are in',
-        "# scenes/data/leds.toml and led_parts.toml); drive and diffusers are set per run",
+        "# scenes/data/leds.toml and led_parts.toml), at its datasheet colour unless a",
+        "# [dominant_wavelength_nm] table gives another within the colour's band (e.g. green = { value =",
+        '# 505.0, source = "its datasheet" }; the bands: scenes.led.HUE_BANDS_NM). Drive and diffusers are set per run',
         "# (--led-current-ma, --foam, --paper-sheets, --paper-colour).",
     ]
     for line in lines:

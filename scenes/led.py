@@ -31,8 +31,10 @@ from scenes import spectra
 from scenes.sourced import DATA_DIR, load_sourced
 
 __all__ = [
+    "HUE_BANDS_NM",
     "LED",
     "SIDE_COLOURS",
+    "check_hue",
     "led_for_side",
     "led_part",
     "led_part_names",
@@ -43,6 +45,22 @@ __all__ = [
 
 SIDE_COLOURS = ("red", "green", "blue", "yellow")
 """Beacon side colours, in the order the study's detector tries them."""
+
+HUE_BANDS_NM: dict[str, tuple[float, float]] = {
+    "red": (610.0, 640.0),
+    "green": (500.0, 540.0),
+    "blue": (450.0, 480.0),
+    "yellow": (583.0, 600.0),
+}
+"""Dominant wavelengths (nm) a side of each colour may be given (a beacon file's
+``[dominant_wavelength_nm]`` table; the design search's side colour). Assumed: the bands 5 mm lamps
+of each colour are sold in, around the default parts' datasheet bins (``scenes/data/leds.toml``:
+red 618-630 nm, blue 465-475 nm, yellow 585-595 nm, green typical 527 nm): AlInGaP red from
+red-orange (610 nm) to deep red (640 nm); InGaN green from cyan "traffic" green (500 nm) to pure
+green (540 nm), leaving out AlInGaP yellow-green (560-575 nm), which would crowd yellow; InGaN
+royal blue (450 nm) to blue (480 nm); AlInGaP yellow (583 nm) to amber (600 nm), short of
+orange, which would crowd red. The bands keep the four colours apart as the study's tracker
+names them, so a side keeps its name."""
 
 
 @dataclass(frozen=True)
@@ -219,6 +237,24 @@ def led_part(name: str, side: str | None = None) -> LED:
         got = f"{name!r} ({parts[name].colour})"
         raise ValueError(f"led: expected a {side} part for the {side} side ({fits}), got {got}")
     return parts[name]
+
+
+def check_hue(side: str, dominant_nm: float) -> float:
+    """``dominant_nm`` as a float when it lies in the side colour's band (:data:`HUE_BANDS_NM`), else a
+    one-line ``ValueError`` naming the side and the band.
+
+    >>> check_hue("green", 505)
+    505.0
+    """
+    if side not in HUE_BANDS_NM:
+        raise ValueError(f"side: expected one of {', '.join(SIDE_COLOURS)}, got {side!r}")
+    low, high = HUE_BANDS_NM[side]
+    if isinstance(dominant_nm, bool) or not isinstance(dominant_nm, int | float) or not low <= dominant_nm <= high:
+        raise ValueError(
+            f"dominant_wavelength_nm.{side}: expected a {side} dominant wavelength of {low:g}-{high:g} nm, "
+            f"got {dominant_nm!r}"
+        )
+    return float(dominant_nm)
 
 
 def led_for_side(side: str) -> LED:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from scenes.beacon import BeaconDesign, beacon_design
 from scenes.hardware import add_hardware_file, hardware_source
-from scenes.led import led_part
+from scenes.led import check_hue, led_part
 
 __all__ = ["FACES", "BeaconParameters"]
 
@@ -59,6 +59,9 @@ class BeaconParameters:
     leds
         (side, LED part) of the sides that do not use their colour's default part
         (:func:`scenes.led.led_parts`; the file's ``[leds]`` table), sorted by side.
+    hues_nm
+        (side, dominant wavelength, nm) of the sides given another colour within their colour's band
+        (:func:`scenes.led.check_hue`; the file's ``[dominant_wavelength_nm]`` table), sorted by side.
     """
 
     arm_length_mm: float
@@ -67,6 +70,7 @@ class BeaconParameters:
     in_plane_leds_face: str = "viewer"
     base: str = "v2"
     leds: tuple[tuple[str, str], ...] = ()
+    hues_nm: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         for name in _NUMBERS:
@@ -85,6 +89,10 @@ class BeaconParameters:
                 raise ValueError(f"leds.{side}: {str(exc).removeprefix('led: ')}") from None
         if list(self.leds) != sorted(dict(self.leds).items()):
             raise ValueError(f"leds: expected (side, part) pairs sorted by side, one per side, got {self.leds!r}")
+        for side, nm in self.hues_nm:
+            check_hue(side, nm)
+        if list(self.hues_nm) != sorted(dict(self.hues_nm).items()):
+            raise ValueError(f"hues_nm: expected (side, nm) pairs sorted by side, one per side, got {self.hues_nm!r}")
         if self.in_plane_leds_face not in FACES:
             raise ValueError(f"in_plane_leds_face: expected one of {', '.join(FACES)}, got {self.in_plane_leds_face!r}")
 
@@ -100,6 +108,7 @@ class BeaconParameters:
             in_plane_leds_face=face.group(1) if face else "viewer",
             base=name,
             leds=d.led_parts,
+            hues_nm=d.led_dominant_nm,
         )
 
     @property
@@ -110,7 +119,9 @@ class BeaconParameters:
     @property
     def name(self) -> str:
         """A name that says what the instance is and cannot clash between different ones."""
-        values = tuple(getattr(self, f.name) for f in fields(self) if f.name != "leds" or self.leds)  # () as before
+        # an empty table is left out, so that names made before it existed stay the same
+        tables = ("leds", "hues_nm")
+        values = tuple(getattr(self, f.name) for f in fields(self) if f.name not in tables or getattr(self, f.name))
         digest = hashlib.sha256(repr(values).encode()).hexdigest()[:8]
         sizes = f"arm{self.arm_length_mm:.4g}-out{self.out_of_plane_mm:.4g}-face{self.lit_face_diameter_mm:.4g}"
         return f"{self.base}-{sizes}-{digest}"
@@ -122,8 +133,8 @@ class BeaconParameters:
         in_leds = False
         for line in hardware_source("beacon", self.base).text.splitlines():
             if line.strip().startswith("["):
-                in_leds = line.strip() == "[leds]"
-            if in_leds:  # the base's own parts: replaced by this instance's table below
+                in_leds = line.strip() in ("[leds]", "[dominant_wavelength_nm]")
+            if in_leds:  # the base's own parts and colours: replaced by this instance's tables below
                 continue
             key = line.split("=", 1)[0].strip()
             if key == "name":
@@ -140,6 +151,9 @@ class BeaconParameters:
             out.append(line)
         if self.leds:
             out += ["", "[leds]", *(f'{side} = "{part}"' for side, part in self.leds)]
+        if self.hues_nm:
+            out += ["", "[dominant_wavelength_nm]"]
+            out += [f'{side} = {{ value = {float(nm)!r}, assumed = "{why}" }}' for side, nm in self.hues_nm]
         return "\n".join(out) + "\n"
 
     def register(self, folder: Path) -> str:

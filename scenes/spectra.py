@@ -94,6 +94,14 @@ def dominant_wavelength_nm(shape: NDArray[np.float64]) -> float:
     return float(colour.dominant_wavelength(xy, white, cmfs=cie1931_cmfs())[0])
 
 
+def _dominant_wavelengths_nm(shapes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`dominant_wavelength_nm` of many spectra at once (rows of ``shapes``), nm: their XYZ by
+    one product with the colour-matching functions (the scale, which xy does not see, left out)."""
+    xy = colour.XYZ_to_xy(shapes @ cie1931_cmfs().values)
+    white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["E"]
+    return np.asarray(colour.dominant_wavelength(xy, white, cmfs=cie1931_cmfs())[0], dtype=np.float64)
+
+
 @lru_cache(maxsize=1)
 def cie1931_cmfs() -> colour.MultiSpectralDistributions:
     """CIE 1931 2° colour-matching functions on the project's grid."""
@@ -110,7 +118,9 @@ def peak_for_dominant_nm(dominant_nm: float, fwhm_nm: float) -> float:
     finer than the 1 nm resolution of the dominant wavelength itself.
     """
     candidates = np.arange(dominant_nm - 20.0, dominant_nm + 20.0 + 1e-9, 0.25)
-    errors = np.array([abs(dominant_wavelength_nm(led_shape(float(p), fwhm_nm)) - dominant_nm) for p in candidates])
+    shapes = np.stack([colour.sd_single_led(float(p), half_spectral_width=fwhm_nm, shape=SPECTRAL_SHAPE).values
+                       for p in candidates])  # fmt: skip
+    errors = np.abs(_dominant_wavelengths_nm(shapes) - dominant_nm)
     best = np.flatnonzero(errors == errors.min())
     return float(np.median(candidates[best]))
 

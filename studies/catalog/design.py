@@ -3,7 +3,8 @@
 A design (:data:`SPACE`) is a parametric beacon (:class:`scenes.parametric_beacon.BeaconParameters`:
 in-plane and out-of-plane marker offsets, lit face, the side's LED part where its colour has more
 than one) with what a run sets per side (LED drive, foam, paper sheets), and, for an
-interchangeable-lens body, the lens's focal length (:func:`space_for`).
+interchangeable-lens body, the lens's focal length, and the side's colour: its LED's dominant
+wavelength within its colour's band (:func:`hue_range`) (:func:`space_for`).
 Each design is evaluated by a sequential range-limit run (:mod:`studies.catalog.range_limit`) of
 one camera at one yaw: its far limit (P(correct pose) ≥ 0.95, or the level the target asks for,
 best tracker; "≥ the farthest range tried" counts as that range), the optical power of one side
@@ -30,13 +31,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from camera_models.lens_variant import register_lens_variant
-from scenes.led import led_for_side, led_part, led_part_names
+from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_for_side, led_part, led_part_names
 from scenes.parametric_beacon import BeaconParameters
 from scenes.render_cache import atomic_write_bytes
 from studies.catalog import range_limit
@@ -68,6 +70,7 @@ __all__ = [
     "Target",
     "current_for_side_power",
     "evaluate_design",
+    "hue_range",
     "run",
     "scored_far_limit",
     "space_for",
@@ -134,6 +137,8 @@ class Target:
     p_working
         The probability of a correct pose the far limit stands for (0.5 < p < 1; the engine's
         :data:`~studies.engine.max_range.P_WORKING` by default).
+    side_colour
+        Also search the side's colour: its LED's dominant wavelength (:func:`hue_range`).
     """
 
     camera: str
@@ -145,6 +150,7 @@ class Target:
     physics_source: str = ""
     at: str = "nominal"
     p_working: float = P_WORKING
+    side_colour: bool = False
 
     def __post_init__(self) -> None:
         check_p_working(self.p_working)
@@ -158,7 +164,8 @@ class Target:
 
 def space_for(target: Target) -> DesignSpace:
     """:data:`SPACE`, with the LED part when the side's colour has more than one
-    (:func:`scenes.led.led_part_names`) and the lens's focal length when the target searches it."""
+    (:func:`scenes.led.led_part_names`), and the lens's focal length and the side's colour
+    (:func:`hue_range`) when the target searches them."""
     params = list(SPACE.params)
     parts = led_part_names(target.side)
     if len(parts) > 1:
@@ -169,7 +176,60 @@ def space_for(target: Target) -> DesignSpace:
         params.append(float_param("focal_length_mm", float(low), float(high), log=True, unit="mm",
                                   assumed="the user's range of lenses for the body (--focal-length-mm), each at the "
                                   "base lens's f-number, blur and distortion"))  # fmt: skip
+    if target.side_colour:
+        low, high = hue_range(target.side)
+        params.append(float_param("dominant_wavelength_nm", low, high, unit="nm",
+                                  assumed=f"the {target.side} LED's dominant wavelength: the band {target.side} 5 mm "
+                                  "lamps are made in (scenes.led.HUE_BANDS_NM), as far as the side's colour stays "
+                                  "at least as far from every other side's as the study's closest pair "
+                                  "(hue_range)"))  # fmt: skip
     return SPACE if len(params) == len(SPACE.params) else DesignSpace(tuple(params))
+
+
+def _chroma_distances(hues: dict[str, float]) -> dict[tuple[str, str], float]:
+    """Distance between each pair of sides' references of the better tracker (ideal-sRGB (r, g),
+    :func:`pipeline.tracker.ideal_chroma`), the sides at the dominant wavelengths given (else their
+    default parts')."""
+    from pipeline.tracker import ideal_chroma
+
+    chroma = {c: np.array(ideal_chroma(_side_led(c, None, hues.get(c)))) for c in SIDE_COLOURS}
+    pairs = [(a, b) for i, a in enumerate(SIDE_COLOURS) for b in SIDE_COLOURS[i + 1 :]]
+    return {(a, b): float(np.hypot(*(chroma[a] - chroma[b]))) for a, b in pairs}
+
+
+@lru_cache(maxsize=8)
+def hue_range(side: str, step_nm: float = 1.0) -> tuple[float, float]:
+    """The dominant wavelengths (nm) the design search gives a side: the stretch of its colour's band
+    (:data:`scenes.led.HUE_BANDS_NM`) around its default part's wavelength where its reference
+    chromaticity stays at least as far from every other side's as the study's own closest pair
+    (red and yellow), so the better tracker can name it as surely as it names the study's colours.
+    Scanned in ``step_nm`` steps (the datasheets' 1 nm resolution of the dominant wavelength).
+
+    >>> hue_range("yellow")  # towards amber, yellow crowds red
+    (583.0, 590.0)
+    """
+    low, high = HUE_BANDS_NM[side]
+    closest = min(_chroma_distances({}).values())
+    default = led_for_side(side).dominant_wavelength_nm
+
+    def apart(nm: float) -> bool:
+        dist = _chroma_distances({side: nm})
+        return min(d for pair, d in dist.items() if side in pair) >= closest - 1e-12
+
+    grid = np.arange(low, high + step_nm / 2, step_nm)
+    ok = [apart(float(nm)) for nm in grid]
+    k = int(np.argmin(np.abs(grid - default)))
+    lo = hi = k
+    while lo > 0 and ok[lo - 1]:
+        lo -= 1
+    while hi < len(grid) - 1 and ok[hi + 1]:
+        hi += 1
+    return float(grid[lo]), float(grid[hi])
+
+
+def _side_led(side: str, part: str | None, hue_nm: float | None) -> LED:
+    led = led_part(part or side, side)
+    return led if hue_nm is None else replace(led, dominant_wavelength_nm=float(hue_nm))
 
 
 @dataclass(frozen=True)
@@ -186,16 +246,18 @@ class Budget:
         return tuple(out)
 
 
-def side_power_mW(side: str, current_mA: float, part: str | None = None) -> float:
+def side_power_mW(side: str, current_mA: float, part: str | None = None, hue_nm: float | None = None) -> float:
     """Optical power of one side's five LEDs at ``current_mA``, mW: the ``part`` named (default: the
-    side colour's default part, :func:`scenes.led.led_parts`)."""
-    return MARKERS * 1e3 * led_part(part or side, side).radiant_flux_W(current_mA)
+    side colour's default part, :func:`scenes.led.led_parts`), at dominant wavelength ``hue_nm`` (default
+    the part's; its luminous intensity kept, :meth:`scenes.beacon.BeaconDesign.led`)."""
+    return MARKERS * 1e3 * _side_led(side, part, hue_nm).radiant_flux_W(current_mA)
 
 
-def current_for_side_power(side: str, power_mW: float, part: str | None = None) -> float:
-    """The drive current at which one side's five LEDs (``part``, default the colour's) emit ``power_mW``
-    of optical power, mA (:meth:`scenes.led.LED.current_for_flux_mA`: not linear where γ ≠ 1)."""
-    return led_part(part or side, side).current_for_flux_mA(power_mW / (MARKERS * 1e3))
+def current_for_side_power(side: str, power_mW: float, part: str | None = None, hue_nm: float | None = None) -> float:
+    """The drive current at which one side's five LEDs (``part``, default the colour's, at ``hue_nm``)
+    emit ``power_mW`` of optical power, mA (:meth:`scenes.led.LED.current_for_flux_mA`: not linear where
+    γ ≠ 1)."""
+    return _side_led(side, part, hue_nm).current_for_flux_mA(power_mW / (MARKERS * 1e3))
 
 
 def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
@@ -218,11 +280,14 @@ def evaluate_design(design: dict, target: Target, out: Path, execution: Executio
     """A design's metrics: its beacon registered, a sequential range-limit run of ``target`` in
     ``out/evaluations/<beacon>``, the far limit of its best-tracker record."""
     part = design.get("led", target.side)
+    hue = design.get("dominant_wavelength_nm")
+    hue = None if hue is None else round(float(hue), 1)
     params = BeaconParameters(
         arm_length_mm=round(float(design["arm_length_mm"]), 3),
         out_of_plane_mm=round(float(design["out_of_plane_mm"]), 3),
         lit_face_diameter_mm=round(float(design["lit_face_diameter_mm"]), 3),
         leds=((target.side, part),) if part != target.side else (),
+        hues_nm=((target.side, hue),) if hue is not None else (),
     )
     beacon = params.register(out / "beacons")
     if "focal_length_mm" in design:
@@ -241,7 +306,7 @@ def evaluate_design(design: dict, target: Target, out: Path, execution: Executio
     )
     return {
         "far_limit_m": min(scored_far_limit(rec, target.at) for rec in summary["max_range"]),
-        "side_power_mW": side_power_mW(target.side, float(design["led_current_mA"]), part),
+        "side_power_mW": side_power_mW(target.side, float(design["led_current_mA"]), part, hue),
         "span_mm": params.span_mm,
     }
 
@@ -330,7 +395,8 @@ COLUMNS = {
     "foam": "foam",
     "paper_sheets": "sheets",
 }
-"""The report table's columns and their headers (``led`` and ``focal_length_mm`` added when searched)."""
+"""The report table's columns and their headers (``led``, ``focal_length_mm`` and ``dominant_wavelength_nm``
+added when searched)."""
 
 
 def _far(far_limit_m: float, p_working: float) -> str:
@@ -360,6 +426,7 @@ def _report(out: Path, summary: dict) -> None:
             f"sheet{'' if d['paper_sheets'] == 1 else 's'}"
             + (f", the {d['led']} LED part" if "led" in d else "")
             + (f", a {d['focal_length_mm']:.3g} mm lens" if "focal_length_mm" in d else "")
+            + (f", the side's LED at {d['dominant_wavelength_nm']:.4g} nm" if "dominant_wavelength_nm" in d else "")
             + f" ({m['side_power_mW']:.3g} mW per side, {m['span_mm']:.0f} mm span)."
         )
     else:
@@ -368,8 +435,12 @@ def _report(out: Path, summary: dict) -> None:
     rows = [{**p["design"], **p["metrics"], "trial": p["trial"]} for p in summary["front"]]
     rows.append({**v2["design"], **v2["metrics"], "trial": "V2 as built"})
     searched = {key for p in summary["front"] for key in p["design"]}
-    columns = {**COLUMNS, **{k: v for k, v in (("led", "LED part"), ("focal_length_mm", "lens, mm")) if k in searched}}
-    rows = [{**r, "led": r.get("led", t["side"])} for r in rows]  # V2 as built: the colour's default part
+    added = (("led", "LED part"), ("focal_length_mm", "lens, mm"), ("dominant_wavelength_nm", "λD, nm"))
+    columns = {**COLUMNS, **{k: v for k, v in added if k in searched}}
+    default_nm = led_for_side(t["side"]).dominant_wavelength_nm
+    # V2 as built: the colour's default part at its datasheet colour
+    rows = [{**r, "led": r.get("led", t["side"]), "dominant_wavelength_nm": r.get("dominant_wavelength_nm", default_nm)}
+            for r in rows]  # fmt: skip
     rep.table(
         pd.DataFrame(rows).reindex(columns=list(columns)),
         "The Pareto front (far limit, power per side, span) and V2 at the same budget",

@@ -617,6 +617,14 @@ def design(
             show_default="the camera's own lens",
         ),
     ] = None,
+    side_colour: Annotated[
+        bool,
+        typer.Option(
+            "--side-colour",
+            help="Also search the side's colour: its LED's dominant wavelength within the band lamps of that colour "
+            "are made in, as far as it stays as distinct from the other sides as the study's closest pair.",
+        ),
+    ] = False,
     trials: Annotated[int, typer.Option("--trials", help="Designs to evaluate (each a range-limit run).")] = 40,
     uncertainty: opt.Uncertainty = None,
     physics_from: opt.PhysicsFrom = "calibration",
@@ -642,7 +650,8 @@ def design(
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
-    """Search the beacon's design (marker offsets, lit face, LED part, drive, diffusers; a lens) for the far
+    """Search the beacon's design (marker offsets, lit face, LED part, drive, diffusers; a lens, the side's
+    colour) for the far
     limit over the yaws under a power budget: the Pareto front of far limit, power and span, beside V2 at
     the same budget. With --uncertainty N every design also runs at N points of the unknowns and --at says
     which far limit scores it."""
@@ -662,11 +671,13 @@ def design(
         raise UsageError(f"p-working: expected a probability between 0.5 and 1 (exclusive), got {p_working:g}")
     physics, source = physics_points(uncertainty, physics_from)
     ranges = {p.name: p for p in search_design.SPACE.params}
-    least = min(search_design.side_power_mW(side, ranges["led_current_mA"].low, p) for p in led_part_names(side))
+    hues = search_design.hue_range(side) if side_colour else (None,)
+    low_mA = ranges["led_current_mA"].low
+    least = min(search_design.side_power_mW(side, low_mA, p, nm) for p in led_part_names(side) for nm in hues)
     if not max_side_power_mw >= least:
         raise UsageError(
             f"max-side-power-mw: expected at least {least:.3g} mW (five LEDs at the search's lowest drive, "
-            f"{ranges['led_current_mA'].low:g} mA): no design fits {max_side_power_mw:g}"
+            f"{low_mA:g} mA): no design fits {max_side_power_mw:g}"
         )
     smallest = 2 * ranges["arm_length_mm"].low + ranges["lit_face_diameter_mm"].low
     if max_span_mm is not None and not max_span_mm >= smallest:
@@ -690,7 +701,7 @@ def design(
             raise UsageError(f"focal-length-mm: {exc}") from None
     target = search_design.Target(
         camera=camera, side=side, yaws_deg=yaws, quick=quick, focal_lengths_mm=lenses, physics=physics,
-        physics_source=source, at=at, p_working=p_working,
+        physics_source=source, at=at, p_working=p_working, side_colour=side_colour,
     )  # fmt: skip
     budget = search_design.Budget(side_power_mW=max_side_power_mw, span_mm=max_span_mm)
     run_on = execution(workers, scheduler)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -16,7 +18,7 @@ from pipeline.thesis_tracker import (
     hsv_ranges_from_histogram,
     thesis_track,
 )
-from pipeline.tracker import ColourModel, TrackerSettings, calibrate_colours, track
+from pipeline.tracker import ColourModel, TrackerSettings, calibrate_colours, ideal_chroma, track
 from scenes.view import camera_geometry
 from tests.helpers.synthetic import draw_markers, hsv_to_bgr, marker_pixels
 
@@ -188,11 +190,22 @@ def test_default_colour_references_follow_from_the_led_spectra():
     from scenes.led import led_for_side
 
     cmfs = spectra.cie1931_cmfs().values.T
-    for name, (r, g) in ColourModel.default().means.items():
-        xyz = spectra.integrate_nm(led_for_side(name).spectral_shape[None, :] * cmfs)
+
+    def chroma(led):
+        xyz = spectra.integrate_nm(led.spectral_shape[None, :] * cmfs)
         rgb = colour_science.XYZ_to_RGB(xyz, colour_science.RGB_COLOURSPACES["sRGB"], apply_cctf_encoding=False)
         rgb = np.clip(rgb, 0, None)
-        assert np.allclose([r, g], rgb[:2] / rgb.sum(), atol=1e-4), name
+        return rgb[:2] / rgb.sum()
+
+    for name, (r, g) in ColourModel.default().means.items():
+        assert np.allclose([r, g], chroma(led_for_side(name)), atol=1e-4), name
+    # a beacon's own references: the study's beacons give exactly the tabulated ones, and a side
+    # moved within its colour's band (cyan-green 505 nm, amber 597 nm) its own spectrum's
+    assert ColourModel.for_beacon("v2").means == ColourModel.for_beacon("v1").means == ColourModel.default().means
+    for side, nm in (("green", 505.0), ("yellow", 597.0), ("blue", 452.0)):
+        led = dataclasses.replace(led_for_side(side), dominant_wavelength_nm=nm)
+        assert np.allclose(ideal_chroma(led), chroma(led), atol=1e-4), side
+        assert np.hypot(*(np.array(ideal_chroma(led)) - ColourModel.default().means[side])) > 0.02, side
 
 
 def test_study_threshold_procedure_from_close_range_captures():

@@ -172,3 +172,39 @@ def test_a_beacon_file_names_its_led_parts(tmp_path, table, message):
     with pytest.raises(ValueError, match=message) as info:
         beacon_design(add_hardware_file("beacon", path))
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ('green = { value = 505.0, source = "a cyan-green lamp" }', None),
+        (
+            'green = { value = 560.0, assumed = "x" }',
+            r"dominant_wavelength_nm\.green: expected a number >= 500 and <= 540 \(the band of green",
+        ),
+        ('purple = { value = 500.0, source = "x" }', r"dominant_wavelength_nm\.purple: expected a side colour"),
+        ("green = 505.0", r"dominant_wavelength_nm\.green: number 505\.0 has no 'source' or 'assumed' note"),
+    ],
+)
+def test_a_beacon_file_gives_a_side_another_colour_of_its_band(tmp_path, table, message):
+    """A beacon's [dominant_wavelength_nm] table moves a side's LED within its colour's band
+    (scenes.led.HUE_BANDS_NM), the part's other figures kept; the renderer and the better tracker take
+    the LED from the design (Scenario.led, ColourModel.for_beacon). Bad tables are one line naming the field."""
+    from pipeline.tracker import ColourModel
+    from scenes.scenario import Scenario
+
+    path = tmp_path / "hue.toml"
+    path.write_text((EXAMPLES / "v2-arms-100mm.toml").read_text().replace('"v2-arms-100mm"', '"v2-hue"')
+                    + f"\n[dominant_wavelength_nm]\n{table}\n")  # fmt: skip
+    if message is None:
+        name = add_hardware_file("beacon", path)
+        led, default = beacon_design(name).led("green"), beacon_design("v2").led("green")
+        assert led.dominant_wavelength_nm == 505.0 and led.luminous_intensity_cd == default.luminous_intensity_cd
+        assert Scenario(beacon=name, side="green").led == led
+        model = ColourModel.for_beacon(name)
+        assert model.means["red"] == ColourModel.default().means["red"]
+        assert model.means["green"] != ColourModel.default().means["green"]
+        return
+    with pytest.raises(ValueError, match=message) as info:
+        beacon_design(add_hardware_file("beacon", path))
+    assert "\n" not in str(info.value)

@@ -216,3 +216,89 @@ def test_a_design_is_scored_at_the_working_level_the_target_asks_for(monkeypatch
             design.Target(camera="logitech-c270", p_working=0.3)
     finally:
         clear_user_hardware()
+
+
+def _r50_by_hue(task) -> float:
+    """Far limit's midpoint, m: the planted truth peaks where the green side's LED is at 512 nm."""
+    sc = task["scenario"]
+    nm = beacon_design(sc["beacon"]).led(sc["side"]).dominant_wavelength_nm
+    return 9.0 - 0.15 * abs(nm - 512.0) + 0.02 * beacon_design(sc["beacon"]).arm_length_m * 1e3
+
+
+def test_the_search_finds_the_side_colour_of_a_planted_optimum(monkeypatch, tmp_path):
+    """With --side-colour the green side's dominant wavelength is a design parameter over its band
+    (500-540 nm): on a planted truth that peaks at 512 nm the farthest design's LED is near it, its
+    beacon file gives the side that colour, and its power is that of the part at that colour (the
+    luminous intensity kept: the radiant flux follows the efficacy of the shifted spectrum)."""
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(_r50_by_hue))
+    target = design.Target(camera="logitech-c270", side="green", yaws_deg=(0.0,), quick=True, side_colour=True)
+    param = {p.name: p for p in design.space_for(target).params}["dominant_wavelength_nm"]
+    assert (param.low, param.high) == (500.0, 540.0)
+    try:
+        summary = design.run(tmp_path, target, design.Budget(side_power_mW=10.0), trials=24, seed=2)
+        best = max(summary["front"], key=lambda p: p["metrics"]["far_limit_m"])
+        nm = best["design"]["dominant_wavelength_nm"]
+        assert abs(nm - 512.0) < 8.0, nm  # the band is 40 nm wide; 24 designs
+        files = list((tmp_path / "beacons").glob("*.toml"))
+        led = [beacon_design(f.stem).led("green") for f in files if f"value = {round(nm, 1)!r}" in f.read_text()]
+        assert led and led[0].dominant_wavelength_nm == round(nm, 1)
+        assert led[0].luminous_intensity_cd == design.led_for_side("green").luminous_intensity_cd
+        from scenes import spectra
+
+        k = spectra.K_M_LM_PER_W * spectra.integrate_nm(spectra.photopic_luminosity() * led[0].spectral_shape)
+        flux = led[0].luminous_intensity_cd / k * led[0].flux_per_intensity_sr  # at 20 mA, the reference drive
+        current = best["design"]["led_current_mA"]
+        scale = (current / led[0].reference_current_mA) ** led[0].current_exponent
+        assert best["metrics"]["side_power_mW"] == pytest.approx(5e3 * flux * scale, rel=1e-9)
+        assert "λD, nm" in (tmp_path / "report.html").read_text()
+        assert "dominant_wavelength_nm" not in {p.name for p in design.space_for(design.Target("logitech-c270")).params}
+    finally:
+        clear_user_hardware()
+
+
+def test_a_side_colour_is_searched_only_as_far_as_it_stays_apart_from_the_others():
+    """The better tracker names sides by their ideal-sRGB chromaticity; the study's closest pair is red
+    and yellow. Recomputed here with colour-science (spectrum → XYZ → linear sRGB, clipped): yellow at
+    its datasheet 590 nm is exactly that far from red and closer at 591 nm (towards amber), so the
+    search keeps yellow in 583-590 nm; red, blue and green keep their whole bands."""
+    import dataclasses
+
+    import colour as colour_science
+    import numpy as np
+
+    from scenes import spectra
+    from scenes.led import HUE_BANDS_NM, SIDE_COLOURS, led_for_side
+
+    def chroma(side, nm=None):
+        led = led_for_side(side)
+        led = led if nm is None else dataclasses.replace(led, dominant_wavelength_nm=nm)
+        xyz = spectra.integrate_nm(led.spectral_shape[None, :] * spectra.cie1931_cmfs().values.T)
+        rgb = np.clip(colour_science.XYZ_to_RGB(xyz, colour_science.RGB_COLOURSPACES["sRGB"]), 0, None)
+        return np.round(rgb[:2] / rgb.sum(), 4)
+
+    pairs = {(a, b): np.hypot(*(chroma(a) - chroma(b))) for a in SIDE_COLOURS for b in SIDE_COLOURS if a < b}
+    assert min(pairs, key=pairs.get) == ("red", "yellow")
+    closest = pairs["red", "yellow"]
+    assert np.hypot(*(chroma("yellow", 591.0) - chroma("red"))) < closest
+    assert design.hue_range("yellow") == (HUE_BANDS_NM["yellow"][0], 590.0)
+    for side in ("red", "green", "blue"):
+        assert design.hue_range(side) == HUE_BANDS_NM[side]
+
+
+def test_a_parametric_beacon_gives_its_sides_colours_in_its_file(tmp_path):
+    from scenes import spectra
+    from scenes.parametric_beacon import BeaconParameters
+
+    try:
+        p = BeaconParameters(80, 40, 12, hues_nm=(("green", 505.0), ("yellow", 585.0)))
+        d = beacon_design(p.register(tmp_path))
+        assert d.led("green").dominant_wavelength_nm == 505.0 and BeaconParameters.of(d.name).hues_nm == p.hues_nm
+        # the model spectrum of the shifted part has that dominant wavelength (colour-science's, 1 nm)
+        assert spectra.dominant_wavelength_nm(d.led("green").spectral_shape) == 505.0
+        assert d.led("red") == beacon_design("v2").led("red")
+        assert BeaconParameters(80, 40, 12).name != p.name
+        with pytest.raises(ValueError, match=r"dominant_wavelength_nm\.yellow: expected a yellow dominant wavelength "
+                           r"of 583-600 nm, got 620"):  # fmt: skip
+            BeaconParameters(80, 40, 12, hues_nm=(("yellow", 620.0),))
+    finally:
+        clear_user_hardware()
