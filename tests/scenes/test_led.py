@@ -100,3 +100,14 @@ def test_the_current_for_a_flux_inverts_the_drive_law(colour):
         assert led.current_for_flux_mA(led.radiant_flux_W(current)) == pytest.approx(current, rel=1e-12)
     with pytest.raises(ValueError, match=r"flux_W: expected a radiant flux > 0 W, got 0"):
         led.current_for_flux_mA(0)
+
+
+def test_the_peak_search_measures_dominant_wavelengths_as_colour_science_does():
+    """peak_for_dominant_nm measures its candidates' dominant wavelengths at once (one product with the
+    colour-matching functions); each equals colour-science's own sd_to_XYZ path (dominant_wavelength_nm)
+    for LED spectra across the four colours' bands and widths."""
+    rng = np.random.default_rng(3)
+    peaks, widths = rng.uniform(440.0, 650.0, 60), rng.uniform(12.0, 40.0, 60)
+    shapes = np.stack([spectra.led_shape(float(p), float(w)) for p, w in zip(peaks, widths, strict=True)])
+    one_by_one = [spectra.dominant_wavelength_nm(s) for s in shapes]
+    assert spectra._dominant_wavelengths_nm(shapes).tolist() == one_by_one
