@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from camera_models.lens_variant import register_lens_variant
+from pipeline.tracker import ideal_chroma
 from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_for_side, led_part, led_part_names
 from scenes.parametric_beacon import BeaconParameters
 from scenes.render_cache import atomic_write_bytes
@@ -190,8 +191,6 @@ def _chroma_distances(hues: dict[str, float]) -> dict[tuple[str, str], float]:
     """Distance between each pair of sides' references of the better tracker (ideal-sRGB (r, g),
     :func:`pipeline.tracker.ideal_chroma`), the sides at the dominant wavelengths given (else their
     default parts')."""
-    from pipeline.tracker import ideal_chroma
-
     chroma = {c: np.array(ideal_chroma(_side_led(c, None, hues.get(c)))) for c in SIDE_COLOURS}
     pairs = [(a, b) for i, a in enumerate(SIDE_COLOURS) for b in SIDE_COLOURS[i + 1 :]]
     return {(a, b): float(np.hypot(*(chroma[a] - chroma[b]))) for a, b in pairs}
