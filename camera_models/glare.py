@@ -188,19 +188,19 @@ def defocus_blur_diameter_m(
 def pillbox_kernel(diameter_px: float, *, supersample: int = 8) -> NDArray[np.float64]:
     """Uniform disc of ``diameter_px`` (pixels of the grid it is used on), odd square, sums to 1.
 
-    Each pixel holds the disc's area fraction over ``supersample``² points; a diameter
-    below one point spacing gives the identity kernel [[1]].
+    Each pixel holds the disc's area fraction over ``supersample``² points; a disc that holds
+    none of them (a diameter below √2 / ``supersample``, the diagonal of the points nearest the
+    centre) gives the identity kernel [[1]]: its light stays in its pixel.
     """
     radius = 0.5 * float(diameter_px)
-    if radius * supersample < 0.5:
-        return np.ones((1, 1))
     half = math.ceil(radius + 0.5)
     sub = (np.arange(supersample) + 0.5) / supersample - 0.5
     x = (np.arange(-half, half + 1)[:, None] + sub[None, :]).ravel()
     inside = (x[:, None] ** 2 + x[None, :] ** 2 <= radius * radius).astype(np.float64)
     n = 2 * half + 1
     k = inside.reshape(n, supersample, n, supersample).sum(axis=(1, 3))
-    return k / k.sum()
+    total = k.sum()
+    return k / total if total > 0 else np.ones((1, 1))
 
 
 # -- pixel crosstalk ----------------------------------------------------------------------------------------------

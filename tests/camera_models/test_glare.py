@@ -116,6 +116,21 @@ def test_pillbox_is_a_normalised_disc_of_the_right_area():
     assert np.array_equal(pillbox_kernel(0.0), np.ones((1, 1)))
 
 
+@pytest.mark.parametrize("supersample", [4, 8])
+def test_pillbox_of_any_small_diameter_is_finite_and_keeps_the_light(supersample):
+    """A disc smaller than the diagonal of the sample points nearest the centre (√2/ss) holds none:
+    the identity; from there on it holds the four central points of the centre pixel. (Diameters
+    between 1/ss and √2/ss once gave 0/0, a NaN kernel, and a frame that could not be exposed.)"""
+    edge = math.sqrt(2.0) / supersample
+    for d in np.linspace(0.0, 3.0, 601):
+        k = pillbox_kernel(d, supersample=supersample)
+        assert np.isfinite(k).all() and k.sum() == pytest.approx(1.0, abs=1e-12)
+        if d < edge * (1 - 1e-9):
+            assert np.array_equal(k, np.ones((1, 1)))
+        elif d < 2.0 / supersample:  # still inside the centre pixel only
+            assert k[k.shape[0] // 2, k.shape[1] // 2] == pytest.approx(1.0)
+
+
 def test_crosstalk_keeps_energy_and_mixes_the_mosaic():
     k = crosstalk_kernel(0.04, diagonal_share=0.2)
     assert k.sum() == pytest.approx(1.0, abs=1e-15) and k[1, 1] == pytest.approx(0.96)
