@@ -58,7 +58,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor, as_completed, wait
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -516,12 +516,16 @@ def _run_pool(
         try:
             futures = {pool.submit(run_batch, function, list(batch.values()), hardware): batch for batch in batches}
             for future in as_completed(futures):
+                if future.exception() is not None:
+                    # a failed task: drop the queued batches, store those already running, then raise
+                    running = [f for f in futures if not f.done() and not f.cancel()]
+                    for other in wait(running).done:
+                        if other.exception() is None:
+                            _store_batch(store, futures[other], other.result(), advance, log)
+                    raise future.exception()
                 _store_batch(store, futures[future], future.result(), advance, log)
-        except (KeyboardInterrupt, SystemExit):
-            stop_pool(pool)  # Ctrl-C: stop now; the stored tasks are the resumable state
-            raise
         except BaseException:
-            pool.shutdown(wait=True)  # a failed task: let the others finish, as before
+            stop_pool(pool)  # Ctrl-C, or a failure: no worker outlives the run; the stored tasks are the state
             raise
         pool.shutdown(wait=True)
 
@@ -598,8 +602,8 @@ def _run_dask(
                 if not ready:  # nothing finished: is anyone still working on it?
                     _watch(client, address, lambda: watchdog.observe(len(client.nthreads()), waiting.count()))
                     time.sleep(DASK_POLL_S)
-        except (KeyboardInterrupt, SystemExit, NoWorkersError):
-            client.cancel(list(futures))  # the cluster stops this sweep's tasks; finished ones are stored
+        except BaseException:  # Ctrl-C, no workers, a failed task: the cluster stops this sweep's tasks
+            client.cancel(list(futures))  # finished ones are stored
             raise
 
 

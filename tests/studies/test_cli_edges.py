@@ -339,6 +339,8 @@ def edge_task(task: dict) -> list[dict]:
     machine measurement (the worker's pid) that must stay out of the results table."""
     if task["slow"]:
         time.sleep(float(os.environ.get("EDGE_SLOW_S", "0")))
+    if task.get("fail"):
+        raise ValueError(f"task {task['i']} fails")
     return [{"i": task["i"], "square": task["i"] ** 2, "worker_peak_rss_MiB": float(os.getpid())}]
 
 
@@ -423,6 +425,28 @@ def test_ctrl_c_stops_the_pool_at_once_and_the_resumed_table_is_identical(tmp_pa
     log = (out / MACHINE_LOG).read_text().splitlines()
     assert log[0] == "task,row,field,value" and len(log) == 1 + len(EDGE_TASKS)
     assert {line.split(",")[2] for line in log[1:]} == {"worker_peak_rss_MiB"}
+
+
+def test_a_failed_task_drops_the_queue_keeps_the_running_and_leaves_no_worker(tmp_path, monkeypatch):
+    """One task fails at once while 24 more sleep 1.5 s each: the error reaches the caller once the
+    tasks already handed to the two workers end (stored, for the resume), not after the queue (the
+    pool had run every queued task, 18 s here, storing none, and a Ctrl-C in that wait left its
+    workers running)."""
+    import multiprocessing
+
+    from studies.engine.runner import run_tasks
+
+    monkeypatch.setenv("EDGE_SLOW_S", "1.5")
+    tasks = [{"i": 0, "slow": False, "fail": True}] + [{"i": i, "slow": True} for i in range(1, 25)]
+    t0 = time.monotonic()
+    with pytest.raises(ValueError, match="^task 0 fails$"):
+        run_tasks(tasks, tmp_path, edge_task, workers=2)
+    elapsed = time.monotonic() - t0
+    stored = len(list((tmp_path / "tasks").rglob("*.json")))
+    # running, or in the pool's call queue (workers + 1 deep) when the failure arrived
+    assert 1 <= stored <= 2 * 2 + 1, stored
+    assert elapsed < 14, elapsed
+    assert not multiprocessing.active_children()
 
 
 def test_ctrl_c_during_native_code_ends_the_process_after_a_grace(tmp_path):
