@@ -439,7 +439,7 @@ def test_a_failed_task_drops_the_queue_keeps_the_running_and_leaves_no_worker(tm
     monkeypatch.setenv("EDGE_SLOW_S", "1.5")
     tasks = [{"i": 0, "slow": False, "fail": True}] + [{"i": i, "slow": True} for i in range(1, 25)]
     t0 = time.monotonic()
-    with pytest.raises(ValueError, match="^task 0 fails$"):
+    with pytest.raises(ValueError, match=r"^task 0 fails$"):
         run_tasks(tasks, tmp_path, edge_task, workers=2)
     elapsed = time.monotonic() - t0
     stored = len(list((tmp_path / "tasks").rglob("*.json")))
