@@ -17,7 +17,6 @@ between the two and documents it.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -26,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from scenes.hardware import HardwareFile, hardware_names, hardware_source
-from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_for_side, led_part
+from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_part, side_led
 from scenes.sourced import DataFileError, Fields, loads_sourced
 
 __all__ = [
@@ -113,10 +112,7 @@ class BeaconDesign:
         the dominant wavelength the file gives the side (``[dominant_wavelength_nm]``), if any, with the
         part's other figures (its luminous intensity bin included: assumed, as datasheets bin
         intensity and wavelength apart)."""
-        named = dict(self.led_parts).get(side)
-        led = led_for_side(side) if named is None else led_part(named, side)
-        hue = dict(self.led_dominant_nm).get(side)
-        return led if hue is None else dataclasses.replace(led, dominant_wavelength_nm=hue)
+        return side_led(side, dict(self.led_parts).get(side), dict(self.led_dominant_nm).get(side))
 
     def marker(self, marker_id: int) -> Marker:
         """The marker with the study's number ``marker_id`` (1-5)."""

@@ -21,7 +21,7 @@ gives both Φ and I₀, :func:`wide_fraction_for_flux` solves this for s.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 
 import numpy as np
@@ -40,6 +40,7 @@ __all__ = [
     "led_part_names",
     "led_parts",
     "load_leds",
+    "side_led",
     "wide_fraction_for_flux",
 ]
 
@@ -264,3 +265,16 @@ def led_for_side(side: str) -> LED:
     if side not in leds:
         raise ValueError(f"side: expected one of {', '.join(SIDE_COLOURS)}, got {side!r}")
     return leds[side]
+
+
+def side_led(side: str, part: str | None = None, dominant_nm: float | None = None) -> LED:
+    """The LED of a beacon side: the ``part`` named (:func:`led_part`, of the side's colour), else the
+    colour's default, at the dominant wavelength ``dominant_nm`` (nm; :func:`check_hue` is the caller's)
+    if given, with the part's other figures (its luminous intensity bin included: assumed, as datasheets
+    bin intensity and wavelength apart).
+
+    >>> side_led("green", dominant_nm=512).dominant_wavelength_nm
+    512.0
+    """
+    led = led_for_side(side) if part is None else led_part(part, side)
+    return led if dominant_nm is None else replace(led, dominant_wavelength_nm=float(dominant_nm))

@@ -39,7 +39,7 @@ import pandas as pd
 
 from camera_models.lens_variant import register_lens_variant
 from pipeline.tracker import ideal_chroma
-from scenes.led import HUE_BANDS_NM, LED, SIDE_COLOURS, led_for_side, led_part, led_part_names
+from scenes.led import HUE_BANDS_NM, SIDE_COLOURS, led_for_side, led_part_names, side_led
 from scenes.parametric_beacon import BeaconParameters
 from scenes.render_cache import atomic_write_bytes
 from studies.catalog import range_limit
@@ -191,7 +191,7 @@ def _chroma_distances(hues: dict[str, float]) -> dict[tuple[str, str], float]:
     """Distance between each pair of sides' references of the better tracker (ideal-sRGB (r, g),
     :func:`pipeline.tracker.ideal_chroma`), the sides at the dominant wavelengths given (else their
     default parts')."""
-    chroma = {c: np.array(ideal_chroma(_side_led(c, None, hues.get(c)))) for c in SIDE_COLOURS}
+    chroma = {c: np.array(ideal_chroma(side_led(c, None, hues.get(c)))) for c in SIDE_COLOURS}
     pairs = [(a, b) for i, a in enumerate(SIDE_COLOURS) for b in SIDE_COLOURS[i + 1 :]]
     return {(a, b): float(np.hypot(*(chroma[a] - chroma[b]))) for a, b in pairs}
 
@@ -226,11 +226,6 @@ def hue_range(side: str, step_nm: float = 1.0) -> tuple[float, float]:
     return float(grid[lo]), float(grid[hi])
 
 
-def _side_led(side: str, part: str | None, hue_nm: float | None) -> LED:
-    led = led_part(part or side, side)
-    return led if hue_nm is None else replace(led, dominant_wavelength_nm=float(hue_nm))
-
-
 @dataclass(frozen=True)
 class Budget:
     """The user's constraints: optical power of one side, mW, and the target's span, mm (None: no limit)."""
@@ -249,14 +244,14 @@ def side_power_mW(side: str, current_mA: float, part: str | None = None, hue_nm:
     """Optical power of one side's five LEDs at ``current_mA``, mW: the ``part`` named (default: the
     side colour's default part, :func:`scenes.led.led_parts`), at dominant wavelength ``hue_nm`` (default
     the part's; its luminous intensity kept, :meth:`scenes.beacon.BeaconDesign.led`)."""
-    return MARKERS * 1e3 * _side_led(side, part, hue_nm).radiant_flux_W(current_mA)
+    return MARKERS * 1e3 * side_led(side, part, hue_nm).radiant_flux_W(current_mA)
 
 
 def current_for_side_power(side: str, power_mW: float, part: str | None = None, hue_nm: float | None = None) -> float:
     """The drive current at which one side's five LEDs (``part``, default the colour's, at ``hue_nm``)
     emit ``power_mW`` of optical power, mA (:meth:`scenes.led.LED.current_for_flux_mA`: not linear where
     γ ≠ 1)."""
-    return _side_led(side, part, hue_nm).current_for_flux_mA(power_mW / (MARKERS * 1e3))
+    return side_led(side, part, hue_nm).current_for_flux_mA(power_mW / (MARKERS * 1e3))
 
 
 def _options(target: Target, beacon: str, design: dict) -> StudyOptions:
