@@ -35,6 +35,7 @@ __all__ = [
     "Oversampling",
     "PaperColour",
     "PhysicsFrom",
+    "PointBudgetGrids",
     "RangeM",
     "Scheduler",
     "Seed",
@@ -118,6 +119,15 @@ UnitBudgetFrames = Annotated[
         help="Sequential design: frames one range-limit estimate (a unit) may spend, its coarse grid included; "
         "a limit where P stays near 0.95 cannot take the others' frames.",
         show_default="the study's design",
+    ),
+]
+PointBudgetGrids = Annotated[
+    float | None,
+    typer.Option(
+        "--point-budget-grids",
+        help="Sequential design with --uncertainty: coarse grids of frames each point's range-limit estimate may "
+        "spend (the nominal's keep the design's budget).",
+        show_default="2 with --uncertainty",
     ),
 ]
 Uncertainty = Annotated[

@@ -20,6 +20,7 @@ from studies.engine.run_log import timed_part
 from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
 from studies.engine.tasks import grid_conditions
+from studies.engine.uncertainty import POINT_BUDGET_GRIDS
 
 __all__ = ["COMMANDS", "DESIGN_OPTIONS", "main_job", "study", "validate"]
 
@@ -38,6 +39,7 @@ DESIGN_OPTIONS = {
     "target_relative": "target-relative",
     "budget_frames": "budget-frames",
     "unit_budget_frames": "unit-budget-frames",
+    "point_budget_grids": "point-budget-grids",
     "ranges_m": "ranges-m",
 }
 """Sequential-design fields set on the command line, and their options."""
@@ -86,6 +88,16 @@ def _physics(uncertainty: int | None, physics_from: str, names: tuple[str, ...])
     return physics_points(uncertainty, physics_from)
 
 
+def _point_budget(point_budget_grids: float | None, physics: tuple[dict, ...]) -> float | None:
+    """``--point-budget-grids``: refused without ``--uncertainty`` (there are no points), else the
+    given value or :data:`studies.engine.uncertainty.POINT_BUDGET_GRIDS`."""
+    if point_budget_grids is None:
+        return POINT_BUDGET_GRIDS if physics else None
+    if not physics:
+        raise UsageError("point-budget-grids: expected --uncertainty N as well (the budget of each point's estimates)")
+    return point_budget_grids
+
+
 def study(
     name: Annotated[str, typer.Argument(help=f"One of: {', '.join(STUDIES)}.")],
     out: OutResumable,
@@ -115,6 +127,7 @@ def study(
     unit_budget_frames: opt.UnitBudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
     physics_from: opt.PhysicsFrom = "calibration",
+    point_budget_grids: opt.PointBudgetGrids = None,
     workers: opt.Workers = None,
     scheduler: opt.Scheduler = None,
 ) -> None:
@@ -146,6 +159,14 @@ def study(
         "unit_budget_frames": unit_budget_frames,
     }
     design = _design(name, quick, settings, options)
+    if design is not None:  # each point's estimates within their own budget
+        design = _checked(design.with_overrides(point_budget_grids=_point_budget(point_budget_grids, physics)), options)
+    elif point_budget_grids is not None:
+        _point_budget(point_budget_grids, physics)  # refused without --uncertainty
+        raise UsageError(
+            "point-budget-grids: expected a sequential design as well (--target-width-m, --target-relative, "
+            "--budget-frames or --unit-budget-frames)"
+        )
     execution = _execution(workers, scheduler)
     prepare_out_dir(out, part=name)
     t0 = time.perf_counter()
@@ -213,6 +234,7 @@ def main_job(
     unit_budget_frames: opt.UnitBudgetFrames = None,
     uncertainty: opt.Uncertainty = None,
     physics_from: opt.PhysicsFrom = "calibration",
+    point_budget_grids: opt.PointBudgetGrids = None,
     workers: opt.Workers = None,
 ) -> None:
     """Run the quick versions of the three studies on the built-in defaults; range-limit places
@@ -226,6 +248,7 @@ def main_job(
         "target_relative": target_relative,
         "budget_frames": budget_frames,
         "unit_budget_frames": unit_budget_frames,
+        "point_budget_grids": _point_budget(point_budget_grids, physics),
     }
     designs = {
         n: _checked(SEQUENTIAL[n].default_design(True).with_overrides(**settings), SEQUENTIAL[n].default_options(True))

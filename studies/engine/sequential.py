@@ -47,7 +47,9 @@ about 0.95 cannot be decided by any number of frames, and without a cap it takes
 study's budget from the others (a T6 series of ``webcam-vs-dslr`` took 3 472 of 7 680
 frames and stayed undecided). When a round asks for more frames than the budget has left,
 each undecided unit gets an equal share of what is left, its picks in the order above; a
-unit whose share is below one slot stops.
+unit whose share is below one slot stops. A unit at a point of the unknowns (``--uncertainty``)
+may have a smaller budget of its own (``point_budget_grids``): the noise + physics interval is
+made of the points' limits, whose spread is the physics'.
 
 **Stored and resumable.** Every frame is an ordinary frame task
 (:func:`studies.engine.tasks.frame_task`, noise seed index the next unused one at its
@@ -120,6 +122,12 @@ class SequentialDesign:
         :data:`DEFAULT_BUDGET_PER_UNIT` per unit.
     unit_budget_frames : frames one unit may spend (its coarse grid included); None: only
         the design's budget bounds it.
+    point_budget_grids : a unit at a point of the unknowns (its key's ``point`` set:
+        :func:`studies.engine.uncertainty.over_points`) may spend this many of its coarse grids of
+        frames (and no more than ``unit_budget_frames``); None: as every unit. A noise + physics
+        interval is made of the points' limits, whose spread is the physics': each point's own
+        limit needs less precision than the nominal's (the interval's rate holds with the
+        estimates' noise, :mod:`studies.engine.uncertainty`).
     round_frames : slots each undecided unit adds per round.
     refine : the candidate ranges are the coarse grid's smallest step divided by this.
     max_range_m : farthest range the design may extend to when the farthest range tried
@@ -135,6 +143,7 @@ class SequentialDesign:
     target_relative: float | None = None
     budget_frames: int | None = None
     unit_budget_frames: int | None = None
+    point_budget_grids: float | None = None
     round_frames: int = DEFAULT_ROUND_FRAMES
     refine: int = 2
     max_range_m: float | None = None
@@ -156,6 +165,11 @@ class SequentialDesign:
         unit = self.unit_budget_frames
         if unit is not None and not (isinstance(unit, int) and not isinstance(unit, bool) and unit >= 1):
             raise ValueError(f"unit_budget_frames: expected an integer >= 1, got {unit!r}")
+        grids = self.point_budget_grids
+        if grids is not None and not (
+            isinstance(grids, int | float) and not isinstance(grids, bool) and math.isfinite(grids) and grids >= 1
+        ):
+            raise ValueError(f"point_budget_grids: expected a number >= 1 (coarse grids per point), got {grids!r}")
         if not isinstance(self.round_frames, int) or self.round_frames < 2:
             raise ValueError(f"round_frames: expected an integer >= 2, got {self.round_frames!r}")
         if not isinstance(self.refine, int) or not 1 <= self.refine <= 16:
@@ -461,6 +475,23 @@ def _units(conditions: Sequence[dict], unit_fields: Sequence[tuple[str, str]]) -
     return units
 
 
+def _unit_budgets(
+    units: Mapping[tuple, list[dict]], unit_fields: Sequence[tuple[str, str]], design: SequentialDesign, slots: int
+) -> dict[tuple, int | None]:
+    """Each unit's own budget of frames (None: none): ``unit_budget_frames``, and for a unit at a point
+    of the unknowns at most ``point_budget_grids`` of its coarse grids (``slots`` slots of its base
+    conditions each; never below one grid)."""
+    at = next((i for i, (f, _) in enumerate(unit_fields) if f == "point"), None)
+    out: dict[tuple, int | None] = {}
+    for key, bases in units.items():
+        budget = design.unit_budget_frames
+        if design.point_budget_grids is not None and at is not None and key[at] is not None:
+            cap = math.floor(design.point_budget_grids * slots) * len(bases)
+            budget = cap if budget is None else min(budget, cap)
+        out[key] = budget
+    return out
+
+
 def run_design(
     name: str,
     options: StudyOptions,
@@ -507,6 +538,7 @@ def run_design(
             f"unit_budget_frames: expected at least a unit's coarse grid of {unit_coarse} frames, "
             f"got {design.unit_budget_frames}"
         )
+    unit_budget = _unit_budgets(units, unit_fields, design, len(coarse) * options.seeds)
     run = frames or run_frames
     counts: dict[tuple, dict[float, int]] = {k: {} for k in units}
     fitted: dict[tuple, list[dict]] = {k: [] for k in units}
@@ -540,9 +572,9 @@ def run_design(
             if key in stop:
                 continue
             picks = next_ranges(records[key], design, candidates, coarse, options.seeds, round_index + 1, key)
-            if picks and design.unit_budget_frames is not None:  # what the unit's own budget leaves
+            if picks and unit_budget[key] is not None:  # what the unit's own budget leaves
                 spent_by_unit = sum(counts[key].values()) * len(units[key])
-                left_slots = (design.unit_budget_frames - spent_by_unit) // len(units[key])
+                left_slots = (unit_budget[key] - spent_by_unit) // len(units[key])
                 if left_slots < 1:
                     stop[key] = "unit budget"
                     continue

@@ -34,6 +34,7 @@ import pandas as pd
 from studies.engine.max_range import P_WORKING, estimate_max_range
 
 __all__ = [
+    "POINT_BUDGET_GRIDS",
     "PhysicsInterval",
     "far_limits_at_points",
     "interval_text",
@@ -45,6 +46,17 @@ __all__ = [
     "point_rows",
     "values_at_points",
 ]
+
+
+POINT_BUDGET_GRIDS = 2.0
+"""Coarse grids of frames one unit at a point may spend in a sequential design run with
+``--uncertainty`` (``main-job``, ``study``; :attr:`studies.engine.sequential.SequentialDesign.point_budget_grids`):
+its coarse grid and as many frames again, enough to extend past the farthest range or to narrow the
+crossing once. Assumed: the interval is made of the points' limits, whose spread is the physics'
+(16 registry points of V2 + T6 18 mm at 0° gave far limits from none to ≥ 20 m), so a point's own
+limit needs less precision than the nominal's ±20 %, and the interval keeps its rate with the
+estimates' noise (module docstring; tests/studies/test_uncertainty.py). The sensitivity study keeps
+the design's full budget: its emulator is fitted to each point's value."""
 
 
 @dataclass(frozen=True)

@@ -112,6 +112,12 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
         (["study", "range-limit", "--uncertainty", "4", "--physics-from", "none.csv"],
          r"physics-from: expected a calibration's nroy.csv or 'registry', none.csv is not a file"),
         (["main-job", "--uncertainty", "-2"], r"uncertainty: expected an integer >= 1"),
+        (["main-job", "--point-budget-grids", "2"], r"point-budget-grids: expected --uncertainty N as well"),
+        (["study", "range-limit", "--quick", "--uncertainty", "2", "--physics-from", "registry",
+          "--target-relative", "0.2", "--point-budget-grids", "0.5"],
+         r"point-budget-grids: expected a number >= 1 \(coarse grids per point\), got 0.5"),
+        (["study", "range-limit", "--quick", "--uncertainty", "2", "--physics-from", "registry",
+          "--point-budget-grids", "3"], r"point-budget-grids: expected a sequential design as well"),
     ],
 )  # fmt: skip
 def test_the_command_line_refuses_bad_uncertainty_before_any_work(monkeypatch, tmp_path, args, message):
@@ -137,6 +143,29 @@ def test_the_command_line_gives_the_study_its_points(monkeypatch, tmp_path):
                            "--physics-from", "registry"])  # fmt: skip
     assert code == 0, err
     assert len(seen["o"].physics) == 3 and "from their registry ranges" in seen["o"].physics_source
+
+
+def test_the_main_job_gives_each_point_its_budget_and_the_user_may_change_it(monkeypatch, tmp_path):
+    from studies.catalog import STUDIES
+    from studies.cli import study as study_cli
+    from studies.engine.uncertainty import POINT_BUDGET_GRIDS
+    from tests.helpers.cli import invoke
+
+    seen = {}
+    for name, module in STUDIES.items():
+        monkeypatch.setattr(module, "run", lambda out, options, execution, design=None, n=name: seen.update(
+            {n: design}))  # fmt: skip
+    monkeypatch.setattr(study_cli, "write_index", lambda *a, **k: None)
+    monkeypatch.chdir(tmp_path)
+    for args, grids in (([], POINT_BUDGET_GRIDS), (["--point-budget-grids", "3.5"], 3.5)):
+        seen.clear()
+        code, _, err = invoke(["main-job", "--out", f"o{grids}", "--uncertainty", "2", "--physics-from", "registry",
+                               *args])  # fmt: skip
+        assert code == 0, err
+        assert seen["range-limit"].point_budget_grids == grids  # the main job's one sequential design
+    code, _, err = invoke(["main-job", "--out", "o-none"])
+    assert code == 0, err
+    assert seen["range-limit"].point_budget_grids is None  # no points, no point budget
 
 
 def test_physics_points_take_what_the_calibration_covered_from_its_nroy_set(tmp_path):
@@ -175,6 +204,36 @@ def test_the_main_jobs_design_budget_grows_with_the_points(monkeypatch, tmp_path
     design = range_limit.default_design(True).with_overrides(budget_frames=40)
     summary = range_limit.run(tmp_path, options, design=design)
     assert summary["design"]["budget_frames"] == 120 and summary["design"]["frames"] <= 120
+
+
+def test_each_point_stops_at_its_own_budget_while_the_nominal_keeps_the_designs(monkeypatch, tmp_path):
+    """point_budget_grids = 1.5: a unit at a point spends at most 1.5 of its coarse grids (6 ranges × 3
+    seeds = 18 frames: 27), the nominal unit more where its limit is still open; each point's limit
+    is still estimated near its planted truth (far limit r₅₀ − s ln 19)."""
+    import math
+
+    import pandas as pd
+
+    from studies.catalog import range_limit
+    from studies.engine import sequential
+    from studies.engine.uncertainty import far_limits_at_points, point_rows
+    from tests.helpers.planted_frames import FALL_OFF_M, planted_rows, red_bin
+
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 3.0 + red_bin(t)))  # far: 7.3-9.7 m
+    points = ({"led_intensity_red": 5.5}, {"led_intensity_red": 6.5})
+    options = range_limit.default_options(True).with_overrides(cameras=("logitech-c270",), yaws_deg=(0.0,),
+                                                               physics=points)  # fmt: skip
+    design = range_limit.default_design(True).with_overrides(target_relative=0.05, point_budget_grids=1.5)
+    summary = range_limit.run(tmp_path, options, design=design)
+    units = {u["key"][-1]: u for u in summary["design"]["units"]}
+    assert units[None]["frames"] > 27  # ±5 %: the nominal cannot decide it within 27 frames
+    (limits,) = far_limits_at_points(point_rows(pd.read_parquet(tmp_path / "results.parquet")),
+                                     range_limit.GROUP).values()  # fmt: skip
+    for i, p in enumerate(points):
+        assert units[i]["frames"] <= 27 and units[i]["stop"] == "unit budget"
+        truth = 3.0 + p["led_intensity_red"] - FALL_OFF_M * math.log(19)
+        assert limits[i] == pytest.approx(truth, abs=1.0)  # within half a coarse step of 2 m
+    assert summary["design"]["design"]["point_budget_grids"] == 1.5
 
 
 def _red_points(n: int, seed: int) -> tuple[dict, ...]:
