@@ -383,6 +383,8 @@ def _working_lines(r: dict, where: str) -> list[str]:
     lines = [r["working_range"], f"far limit 95 % interval: {r['far_interval']}"]
     if r.get("far_interval_physics"):
         lines.append(f"with the unknowns (noise + physics): {r['far_interval_physics']}")
+    if r.get("near_interval_physics"):
+        lines.append(f"near limit with the unknowns (noise + physics): {r['near_interval_physics']}")
     if r.get("decision"):
         lines.append(r["decision"])
     if r.get("near_failures"):

@@ -44,6 +44,7 @@ from studies.engine.tasks import StudyOptions, grid_conditions
 from studies.engine.uncertainty import (
     far_limits_at_points,
     interval_text,
+    near_limits_at_points,
     nominal_rows,
     over_points,
     physics_interval,
@@ -91,7 +92,10 @@ ANSWER_LABELS = {
     "correct": "correct frames",
 }
 """Columns of the answer table and their headers."""
-PHYSICS_LABEL = {"far_interval_physics": "far limit, noise + physics"}
+PHYSICS_LABEL = {
+    "far_interval_physics": "far limit, noise + physics",
+    "near_interval_physics": "near limit, noise + physics",
+}
 """The answer table's column with ``--uncertainty`` (the rate and points are in each cell)."""
 DECISION_LABEL = {"decision": "frames that decided it"}
 """The answer table's extra column when a sequential design placed the frames."""
@@ -178,6 +182,7 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
     level = summary_p_working(design)
     physics = far_limits_at_points(point_rows(frame), GROUP, p_working=level)
+    near_physics = near_limits_at_points(point_rows(frame), GROUP, p_working=level)
     frame = nominal_rows(frame)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):
@@ -201,6 +206,11 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
         if key in physics:
             iv = physics_interval(physics[key])
             rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv))
+        if key in near_physics:
+            iv = physics_interval(near_physics[key])
+            rec.update(near_physics=iv.to_dict(), near_interval_physics=interval_text(iv))
+        elif key in physics:
+            rec.update(near_interval_physics="none: no range works at any point")
         if design is not None:
             unit = units.get((cam, beacon, side, float(current), float(yaw)) + ((None,) if physics else ()))
             rec.update(
@@ -318,7 +328,7 @@ def _report(out: Path, options: StudyOptions, frame: pd.DataFrame, summary: dict
         )
         labels = {
             **ANSWER_LABELS,
-            **(PHYSICS_LABEL if "far_interval_physics" in answers else {}),
+            **{k: v for k, v in PHYSICS_LABEL.items() if k in answers},
             **(DECISION_LABEL if "decision" in answers else {}),
         }
         rep.table(
@@ -498,7 +508,8 @@ def _physics_span(physics, farthest: float) -> tuple[float, float] | None:
     None without one."""
     if not isinstance(physics, dict):
         return None
-    return float(physics["low"]), farthest if physics["high"] is None else float(physics["high"])
+    low, high = physics["low"], physics["high"]  # None: "≥ the farthest tried" (a far limit)
+    return farthest if low is None else float(low), farthest if high is None else float(high)
 
 
 def _far_limit_figure(plt, table: pd.DataFrame):

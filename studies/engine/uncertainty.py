@@ -10,7 +10,8 @@ frames' noise on top, which spreads them a little wider than the limits themselv
 interval between the k-th smallest and k-th largest *estimate* holds L* at least that often (the
 *noise + physics* interval; tests/studies/test_uncertainty.py measures both on a planted truth).
 Nothing is assumed of how the limit depends on the unknowns, and a censored estimate ("≥ the
-largest range tried": ∞) keeps its rank: an interval whose k-th largest is censored says "≥".
+largest range tried": ∞; for a near limit "≤ the nearest tried": −∞) keeps its rank: an interval
+whose k-th largest is censored says "≥", one whose k-th smallest is censored below says "≤".
 
 With N = 16 and k = 1 the rate is 1 − 2/17 = 88 %; 95 % needs N ≥ 39. The rate is reported
 beside the interval, never rounded up.
@@ -38,6 +39,7 @@ __all__ = [
     "PhysicsInterval",
     "far_limits_at_points",
     "interval_text",
+    "near_limits_at_points",
     "nominal_rows",
     "order_for",
     "over_points",
@@ -67,7 +69,8 @@ class PhysicsInterval:
     ----------
     low, high
         The interval, in the limit's unit (m); ``high`` is ∞ when the k-th largest estimate is
-        censored ("≥ the largest range tried").
+        censored ("≥ the largest range tried"), ``low`` −∞ when the k-th smallest is censored
+        below ("≤ the nearest range tried", a near limit).
     rate
         Its coverage: 1 − 2k/(N + 1) (at least, with the estimates' noise).
     points
@@ -86,9 +89,10 @@ class PhysicsInterval:
     median: float = math.nan
 
     def to_dict(self) -> dict:
-        """Plain form (``high`` None when censored, for strict JSON)."""
+        """Plain form for strict JSON: a censored end or median is None, on the limit's open side (a far
+        limit's "≥ the farthest tried", a near limit's "≤ the nearest tried")."""
         return {
-            "low": self.low,
+            "low": None if math.isinf(self.low) else self.low,
             "high": None if math.isinf(self.high) else self.high,
             "rate": self.rate,
             "points": self.points,
@@ -113,8 +117,9 @@ def physics_interval(limits: Sequence[float], *, rate: float = 0.95) -> PhysicsI
     Parameters
     ----------
     limits
-        Per point, the estimated limit (m); ``inf`` for "≥ the largest range tried"; NaN is refused
-        (a point without an estimate must be dropped, and said so, by the caller).
+        Per point, the estimated limit (m); ``inf`` for "≥ the largest range tried", ``-inf`` for
+        "≤ the nearest range tried"; NaN is refused (a point without an estimate must be dropped,
+        and said so, by the caller).
     rate
         The coverage wanted; the interval uses the largest order k that reaches it, and states
         the rate it has.
@@ -126,8 +131,8 @@ def physics_interval(limits: Sequence[float], *, rate: float = 0.95) -> PhysicsI
     x = np.asarray(limits, dtype=float)
     if x.ndim != 1 or len(x) == 0:
         raise ValueError(f"limits: expected a non-empty sequence of numbers, got shape {x.shape}")
-    if np.isnan(x).any() or (x == -np.inf).any():
-        raise ValueError("limits: expected numbers or inf, no NaN (drop points without an estimate)")
+    if np.isnan(x).any():
+        raise ValueError("limits: expected numbers or ±inf, no NaN (drop points without an estimate)")
     n = len(x)
     k = order_for(n, rate)
     ranked = np.sort(x)
@@ -184,17 +189,45 @@ def far_limits_at_points(
     return values_at_points(rows, group, far)
 
 
-def interval_text(iv: PhysicsInterval, *, unit: str = " m", at_least: str = "≥ the farthest tried") -> str:
+def near_limits_at_points(
+    rows: pd.DataFrame, group: list[str], *, p_working: float = P_WORKING
+) -> dict[tuple, list[float]]:
+    """Per ``group`` key, the near limit at each point of the unknowns (m; −∞ for "≤ the nearest range
+    tried"), as :func:`far_limits_at_points`; a point where no range works has no near limit and is
+    left out (its far limit, 0, says so)."""
+
+    def near(g: pd.DataFrame) -> float:
+        mr = estimate_max_range(g.to_dict("records"), p_working=p_working)
+        if not mr.max_range_m > 0:
+            return math.nan
+        return -math.inf if mr.near_at_most else float(mr.near_limit_m)
+
+    return values_at_points(rows, group, near)
+
+
+def interval_text(
+    iv: PhysicsInterval,
+    *,
+    unit: str = " m",
+    at_least: str = "≥ the farthest tried",
+    at_most: str = "≤ the nearest tried",
+) -> str:
     """A noise + physics interval in words, "3.1 to 6 m (88 %, 16 points)"; ``unit`` follows the
-    numbers, ``at_least`` stands for a censored upper end ("3.1 to ≥ the farthest tried m").
+    numbers, ``at_least`` stands for a censored upper end ("3.1 to ≥ the farthest tried m"),
+    ``at_most`` for a censored lower one.
 
     Examples
     --------
     >>> interval_text(physics_interval([3.1, 6.0, 4.0]))
     '3.1 to 6 m (50 %, 3 points)'
+    >>> interval_text(physics_interval([-math.inf, 2.5, 4.0]))
+    '≤ the nearest tried to 4 m (50 %, 3 points)'
     """
-    high = at_least if math.isinf(iv.high) else f"{iv.high:.3g}"
-    return f"{iv.low:.3g} to {high}{unit} ({100 * iv.rate:.0f} %, {iv.points} points)"
+
+    def end(x: float) -> str:
+        return f"{x:.3g}" if math.isfinite(x) else (at_least if x > 0 else at_most)
+
+    return f"{end(iv.low)} to {end(iv.high)}{unit} ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 
 def over_points(fields: tuple, design, points: int) -> tuple[tuple, object]:

@@ -25,10 +25,16 @@ def red_bin(task: dict) -> float:
     return (task["scenario"].get("data") or {}).get("leds.red.luminous_intensity_cd", 5.1)
 
 
-def planted_rows(r50: Callable[[dict], float], chroma: Callable[[dict], tuple[float, float]] | None = None):
+def planted_rows(
+    r50: Callable[[dict], float],
+    chroma: Callable[[dict], tuple[float, float]] | None = None,
+    near50: Callable[[dict], float] | None = None,
+):
     """A stand-in for :func:`studies.engine.sweep.run_frames`: one best-tracker row per task. With
     ``chroma`` every marker's (r, g) chromaticity is drawn around ``chroma(task)`` with sd
-    :data:`CHROMA_SD` in each (independent), its sRGB codes (r, g, 1 − r − g) × 255, cores unclipped."""
+    :data:`CHROMA_SD` in each (independent), its sRGB codes (r, g, 1 − r − g) × 255, cores unclipped.
+    With ``near50`` success also rises logistically with range around it (the same width), so the
+    near limit is near50 + s ln 19 where the two fall-offs are far apart."""
 
     def rows(tasks, out, execution, description=""):
         made = []
@@ -42,7 +48,10 @@ def planted_rows(r50: Callable[[dict], float], chroma: Callable[[dict], tuple[fl
                     colours |= {f"marker{i}_r_chroma": r, f"marker{i}_g_chroma": g, f"marker{i}_R": 255 * r,
                                 f"marker{i}_G": 255 * g, f"marker{i}_B": 255 * (1 - r - g)}  # fmt: skip
                 colours["core_saturated_fraction_mean"] = 0.0
-            ok = u / 2**64 < 1 / (1 + math.exp((sc["range_m"] - r50(task)) / FALL_OFF_M))
+            p = 1 / (1 + math.exp((sc["range_m"] - r50(task)) / FALL_OFF_M))
+            if near50 is not None:
+                p /= 1 + math.exp((near50(task) - sc["range_m"]) / FALL_OFF_M)
+            ok = u / 2**64 < p
             made.append({**sc, **(task.get("tags") or {}), "nominal_range_m": task["nominal"]["range_m"],
                          "nominal_yaw_deg": task["nominal"]["yaw_deg"], "seed": task["seed"], "tracker": "best",
                          "estimator": "best", "detected": ok, "side_correct": ok, "numbering_correct": ok,

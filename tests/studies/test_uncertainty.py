@@ -102,6 +102,34 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
         base.with_overrides(physics=({"led_intensity_red": 99},)).validate()
 
 
+def test_the_near_limit_has_its_noise_plus_physics_interval_too(monkeypatch, tmp_path):
+    """A planted near limit that moves with the red LEDs' bin (brighter: blinded nearer out, so the near
+    limit moves out by 1 m per cd) and a far limit past the farthest range: the near limit's noise +
+    physics interval spans the points' truths, its far one says "≥", and both reach the report."""
+    from studies.catalog import range_limit
+    from studies.engine import sequential
+    from studies.engine.max_range import LN19
+    from studies.engine.tasks import StudyOptions
+    from tests.helpers.planted_frames import FALL_OFF_M, planted_rows, red_bin
+
+    near50 = lambda t: 3.0 + (red_bin(t) - 5.1)  # noqa: E731
+    monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 40.0, near50=near50))
+    points = _red_points(16, seed=5)
+    base = StudyOptions(cameras=("canon-t6-18mm",), ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0), seeds=3,
+                        physics=points, physics_source="16 planted points")  # fmt: skip
+    design = sequential.SequentialDesign(target_relative=0.2)
+    rec = range_limit.run(tmp_path, base, design=design)["max_range"][0]
+    truths = sorted(3.0 + (p["led_intensity_red"] - 5.1) + FALL_OFF_M * LN19 for p in points)
+    iv = rec["near_physics"]
+    assert iv["points"] == 16 and iv["rate"] == pytest.approx(1 - 2 / 17)
+    low = -math.inf if iv["low"] is None else iv["low"]  # "≤ the nearest tried" when below 2 m
+    assert (low == -math.inf and truths[0] < 2.5) or low == pytest.approx(truths[0], abs=1.0)
+    assert iv["high"] == pytest.approx(truths[-1], abs=1.0)
+    assert rec["far_physics"]["high"] is None and "≥ the farthest tried" in rec["far_interval_physics"]
+    page = (tmp_path / "report.html").read_text()
+    assert "near limit, noise + physics" in page and rec["near_interval_physics"] in page
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
