@@ -114,14 +114,14 @@ def test_the_near_limit_has_its_noise_plus_physics_interval_too(monkeypatch, tmp
 
     near50 = lambda t: 3.0 + (red_bin(t) - 5.1)  # noqa: E731
     monkeypatch.setattr(sequential, "run_frames", planted_rows(lambda t: 40.0, near50=near50))
-    points = _red_points(16, seed=5)
+    points = _red_points(8, seed=5)
     base = StudyOptions(cameras=("canon-t6-18mm",), ranges_m=(2.0, 4.0, 6.0, 8.0, 10.0, 12.0), seeds=3,
-                        physics=points, physics_source="16 planted points")  # fmt: skip
+                        physics=points, physics_source="8 planted points")  # fmt: skip
     design = sequential.SequentialDesign(target_relative=0.2)
     rec = range_limit.run(tmp_path, base, design=design)["max_range"][0]
     truths = sorted(3.0 + (p["led_intensity_red"] - 5.1) + FALL_OFF_M * LN19 for p in points)
     iv = rec["near_physics"]
-    assert iv["points"] == 16 and iv["rate"] == pytest.approx(1 - 2 / 17)
+    assert iv["points"] == 8 and iv["rate"] == pytest.approx(1 - 2 / 9)
     low = -math.inf if iv["low"] is None else iv["low"]  # "≤ the nearest tried" when below 2 m
     assert (low == -math.inf and truths[0] < 2.5) or low == pytest.approx(truths[0], abs=1.0)
     assert iv["high"] == pytest.approx(truths[-1], abs=1.0)
