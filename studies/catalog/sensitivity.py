@@ -193,6 +193,11 @@ def _report(out: Path, summary: dict) -> None:
             rep.text(sentence)
         if "sobol" in a:
             sob = a["sobol"]
+            rep.figure(
+                _sobol_figure(sob),
+                f"Share of the variance of {a['output']} each unknown explains, on the emulator: alone (first "
+                "order, S1) and with its interactions (total, ST), 95 % bootstrap whiskers",
+            )
             rep.table(
                 pd.DataFrame(
                     {
@@ -218,3 +223,26 @@ def _report(out: Path, summary: dict) -> None:
     rep.table(pd.DataFrame(summary["outputs"]), "Each point's outputs (best tracker)", float_format="{:.3g}")
     rep.text(f"Run time {summary['wall_s']:.0f} s.", note=True)
     rep.write(out / "report.html")
+
+
+def _sobol_figure(sob: dict):
+    """Horizontal bars of each input's first-order and total Sobol' index, largest total on top."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    order = np.argsort(sob["st"])
+    names = [sob["inputs"][i] for i in order]
+    y = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(7.0, 0.45 * len(names) + 1.2))
+    for shift, key, label in ((-0.18, "s1", "alone (S1)"), (0.18, "st", "with interactions (ST)")):
+        values = np.asarray(sob[key], dtype=float)[order]
+        err = np.asarray(sob[f"{key}_conf"], dtype=float)[order]
+        ax.barh(y + shift, values, height=0.34, xerr=err, capsize=2, label=label)
+    ax.set_yticks(y, names)
+    ax.set_xlim(0.0, max(1.0, float(np.nanmax(np.asarray(sob["st"], dtype=float)))))
+    ax.set_xlabel("share of the output's variance")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    return fig

@@ -28,7 +28,10 @@ def test_the_planted_unknown_is_the_one_to_measure_first(monkeypatch, tmp_path):
     assert "on an emulator of 24 runs" in far["emulator"]
     record = json.loads((tmp_path / "sensitivity.json").read_text())
     assert record["points"] == 24 and len(record["outputs"]) == 24
-    assert (tmp_path / "report.html").is_file() and (tmp_path / "range-limit" / "results.parquet").is_file()
+    assert (tmp_path / "range-limit" / "results.parquet").is_file()
+    page = (tmp_path / "report.html").read_text()
+    figures = sum("sobol" in a for a in summary["analyses"].values())  # one chart per ranked output
+    assert page.count("data:image/png;base64,") == figures >= 1 and "Share of the variance of the far limit" in page
 
 
 def test_only_unknowns_that_act_on_the_camera_and_beacon_are_ranked():
