@@ -29,6 +29,9 @@ def test_the_planted_unknown_is_the_one_to_measure_first(monkeypatch, tmp_path):
     record = json.loads((tmp_path / "sensitivity.json").read_text())
     assert record["points"] == 24 and len(record["outputs"]) == 24
     assert (tmp_path / "range-limit" / "results.parquet").is_file()
+    design = json.loads((tmp_path / "range-limit" / "summary.json").read_text())["design"]
+    cap = sensitivity.UNIT_BUDGET_GRIDS * 4 * 2  # the quick grid: 4 ranges × 2 seeds
+    assert design["design"]["unit_budget_frames"] == cap and max(u["frames"] for u in design["units"]) <= cap
     page = (tmp_path / "report.html").read_text()
     figures = sum("sobol" in a for a in summary["analyses"].values())  # one chart per ranked output
     assert page.count("data:image/png;base64,") == figures >= 1 and "Share of the variance of the far limit" in page
