@@ -42,9 +42,8 @@ from studies.engine.sweep import Execution, sweep
 from studies.engine.tables import pose_outcomes, write_tables
 from studies.engine.tasks import StudyOptions, grid_conditions
 from studies.engine.uncertainty import (
-    far_limits_at_points,
     interval_text,
-    near_limits_at_points,
+    limits_at_points,
     nominal_rows,
     over_points,
     physics_interval,
@@ -181,8 +180,7 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
     ``near_decided``, ``design_stop``: the best tracker's, which placed the frames)."""
     units = {tuple(u["key"]): u for u in (design or {}).get("units", [])}
     level = summary_p_working(design)
-    physics = far_limits_at_points(point_rows(frame), GROUP, p_working=level)
-    near_physics = near_limits_at_points(point_rows(frame), GROUP, p_working=level)
+    physics, near_physics = limits_at_points(point_rows(frame), GROUP, p_working=level)
     frame = nominal_rows(frame)
     records = []
     for key, g in frame.groupby(GROUP, sort=True):

@@ -39,6 +39,7 @@ __all__ = [
     "PhysicsInterval",
     "far_limits_at_points",
     "interval_text",
+    "limits_at_points",
     "near_limits_at_points",
     "nominal_rows",
     "order_for",
@@ -165,13 +166,19 @@ def values_at_points(
     value
         The estimate from one key's rows at one point (a far limit, m; a separability; a probability).
     """
-    out: dict[tuple, list[float]] = {}
+    out = {
+        k: [v for v in (float(x) for x in xs) if not math.isnan(v)] for k, xs in _at_points(rows, group, value).items()
+    }
+    return {k: v for k, v in out.items() if v}
+
+
+def _at_points(rows: pd.DataFrame, group: list[str], value: Callable[[pd.DataFrame], object]) -> dict[tuple, list]:
+    """Per ``group`` key, ``value`` of that key's rows at each point, in point order."""
+    out: dict[tuple, list] = {}
     if rows.empty:
         return out
     for key, g in rows.groupby([*group, "point"], sort=True):
-        v = float(value(g))
-        if not math.isnan(v):
-            out.setdefault(tuple(key[:-1]), []).append(v)
+        out.setdefault(tuple(key[:-1]), []).append(value(g))
     return out
 
 
@@ -181,12 +188,7 @@ def far_limits_at_points(
     """Per ``group`` key, the far limit at each point of the unknowns (m; ∞ for "≥ the farthest range
     tried", 0 where no range works): :func:`studies.engine.max_range.estimate_max_range` of its rows
     at level ``p_working``."""
-
-    def far(g: pd.DataFrame) -> float:
-        mr = estimate_max_range(g.to_dict("records"), p_working=p_working)
-        return math.inf if mr.at_least else max(float(mr.max_range_m), 0.0)
-
-    return values_at_points(rows, group, far)
+    return limits_at_points(rows, group, p_working=p_working)[0]
 
 
 def near_limits_at_points(
@@ -195,14 +197,21 @@ def near_limits_at_points(
     """Per ``group`` key, the near limit at each point of the unknowns (m; −∞ for "≤ the nearest range
     tried"), as :func:`far_limits_at_points`; a point where no range works has no near limit and is
     left out (its far limit, 0, says so)."""
+    return limits_at_points(rows, group, p_working=p_working)[1]
 
-    def near(g: pd.DataFrame) -> float:
-        mr = estimate_max_range(g.to_dict("records"), p_working=p_working)
-        if not mr.max_range_m > 0:
-            return math.nan
-        return -math.inf if mr.near_at_most else float(mr.near_limit_m)
 
-    return values_at_points(rows, group, near)
+def limits_at_points(
+    rows: pd.DataFrame, group: list[str], *, p_working: float = P_WORKING
+) -> tuple[dict[tuple, list[float]], dict[tuple, list[float]]]:
+    """(far, near) limits at each point of the unknowns, as :func:`far_limits_at_points` and
+    :func:`near_limits_at_points`, from one fit per key and point."""
+    fits = _at_points(rows, group, lambda g: estimate_max_range(g.to_dict("records"), p_working=p_working))
+    far = {k: [math.inf if m.at_least else max(float(m.max_range_m), 0.0) for m in ms] for k, ms in fits.items()}
+    near = {
+        k: [-math.inf if m.near_at_most else float(m.near_limit_m) for m in ms if m.max_range_m > 0]
+        for k, ms in fits.items()
+    }
+    return far, {k: v for k, v in near.items() if v}
 
 
 def interval_text(
@@ -213,8 +222,8 @@ def interval_text(
     at_most: str = "≤ the nearest tried",
 ) -> str:
     """A noise + physics interval in words, "3.1 to 6 m (88 %, 16 points)"; ``unit`` follows the
-    numbers, ``at_least`` stands for a censored upper end ("3.1 to ≥ the farthest tried m"),
-    ``at_most`` for a censored lower one.
+    numbers, ``at_least`` stands for a censored upper end ("3.1 m to ≥ the farthest tried"), ``at_most``
+    for a censored lower one; both ends censored alike read once ("≥ the farthest tried").
 
     Examples
     --------
@@ -222,12 +231,23 @@ def interval_text(
     '3.1 to 6 m (50 %, 3 points)'
     >>> interval_text(physics_interval([-math.inf, 2.5, 4.0]))
     '≤ the nearest tried to 4 m (50 %, 3 points)'
+    >>> interval_text(physics_interval([3.1, math.inf, math.inf]))
+    '3.1 m to ≥ the farthest tried (50 %, 3 points)'
     """
 
     def end(x: float) -> str:
-        return f"{x:.3g}" if math.isfinite(x) else (at_least if x > 0 else at_most)
+        return at_least if x > 0 else at_most
 
-    return f"{end(iv.low)} to {end(iv.high)}{unit} ({100 * iv.rate:.0f} %, {iv.points} points)"
+    low, high = iv.low, iv.high
+    if math.isfinite(low) and math.isfinite(high):
+        span = f"{low:.3g} to {high:.3g}{unit}"
+    elif math.isfinite(low):
+        span = f"{low:.3g}{unit} to {end(high)}"
+    elif math.isfinite(high):
+        span = f"{end(low)} to {high:.3g}{unit}"
+    else:
+        span = end(low) if (low > 0) == (high > 0) else f"{end(low)} to {end(high)}"
+    return f"{span} ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 
 def over_points(fields: tuple, design, points: int) -> tuple[tuple, object]:
