@@ -66,6 +66,7 @@ __all__ = [
     "Model",
     "Morris",
     "Sobol",
+    "aliased_inputs",
     "emulate",
     "explain",
     "morris",
@@ -451,12 +452,16 @@ class EmulatedModel:
         (standardised errors, 68 %/95 % coverage, RMSE in the output's unit).
     output_sd
         Standard deviation of the finished runs' outputs (output unit).
+    aliases
+        Groups of choice inputs the runs cannot tell apart (:func:`aliased_inputs` of the runs'
+        design): the emulator splits their shared effect by its prior, not by the runs.
     """
 
     space: InputSpace
     emulator: Emulator
     loo: Diagnostics
     output_sd: float
+    aliases: tuple[tuple[str, ...], ...] = ()
 
     @property
     def runs(self) -> int:
@@ -533,7 +538,62 @@ def emulate(
     emulator = fit_emulator(
         space.features(design), outputs, output=output, kernel=kernel, n_restarts=n_restarts, seed=seed
     )
-    return EmulatedModel(space=space, emulator=emulator, loo=diagnose(emulator), output_sd=float(np.std(emulator.y)))
+    return EmulatedModel(
+        space=space,
+        emulator=emulator,
+        loo=diagnose(emulator),
+        output_sd=float(np.std(emulator.y)),
+        aliases=aliased_inputs(space, design[np.isfinite(outputs)]),
+    )
+
+
+def aliased_inputs(space: InputSpace, design: np.ndarray) -> tuple[tuple[str, ...], ...]:
+    """Groups of choice inputs that a set of runs cannot tell apart.
+
+    Two choice inputs are aliased in a design when they split its runs into the same groups: at
+    every run one's choice comes with the same choice of the other (housing white exactly where
+    the paper is matched, say), so any effect of the one could as well be the other's. A
+    scrambled Sobol' design of few points aliases many two-choice inputs: its coordinates' first
+    bits are linear functions of the point's index bits that all hold the lowest one (the first
+    direction number is ½ in every dimension), so 16 points split into halves in only 8 ways
+    whatever the dimension (31 dimensions: 51 of their 465 pairs aliased), 32 points in 16.
+    Inputs that take one choice at every run are left out (no run varies them).
+
+    Parameters
+    ----------
+    space
+        The inputs of the runs.
+    design
+        ``(n, space.dim)`` unit-cube points of the runs.
+
+    Returns
+    -------
+    tuple of tuple of str
+        Each group of two or more aliased inputs, in the space's order.
+
+    Examples
+    --------
+    >>> from studies.engine.calibration.inputs import Input, InputSpace
+    >>> space = InputSpace((Input("housing", choices=("white", "black")),
+    ...                     Input("paper", choices=("matched", "white")), Input("x", 0.0, 1.0)))
+    >>> aliased_inputs(space, np.array([[0.2, 0.1, 0.5], [0.7, 0.9, 0.1], [0.3, 0.4, 0.9]]))
+    (('housing', 'paper'),)
+    """
+    design = np.atleast_2d(np.asarray(design, dtype=float))
+    groups: dict[tuple[int, ...], list[str]] = {}
+    for j, item in enumerate(space.inputs):
+        if not item.categorical:
+            continue
+        choice = item.choice_index(design[:, j])
+        rank = {c: k for k, c in enumerate(dict.fromkeys(choice.tolist()))}  # in order of first appearance
+        partition = tuple(rank[c] for c in choice.tolist())  # so the same split reads the same
+        if len(rank) > 1:
+            groups.setdefault(partition, []).append(item.name)
+    return tuple(tuple(names) for names in groups.values() if len(names) > 1)
+
+
+def _and(words: Sequence[str]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
 
 
 def _percent(x: float) -> str:
@@ -594,6 +654,16 @@ def explain(
         if not isinstance(emulated, EmulatedModel):
             raise ValueError(f"emulated: expected an EmulatedModel, got {type(emulated).__name__}")
         lines.append(emulated.describe())
+        analysed = set(result.inputs)
+        for group in emulated.aliases:
+            if analysed.intersection(group):
+                names = [_label(name, unknowns, descriptions) for name in group]
+                lines.insert(
+                    0,
+                    f"the {emulated.runs} runs cannot tell {_and(names)} apart: at every run one's value came "
+                    "with the same value of the other, so how their effect splits between them is the "
+                    "emulator's guess; more points (--points) would separate them",
+                )
         if not emulated.relative_error <= UNRELIABLE:  # (NaN: a constant output, nothing to rank)
             lines.insert(
                 0,

@@ -13,6 +13,7 @@ closed forms, independently of SALib.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
@@ -21,7 +22,7 @@ import pytest
 
 from studies.engine.calibration.design import sobol as sobol_points
 from studies.engine.calibration.inputs import Input, InputSpace
-from studies.engine.sensitivity import EmulatedModel, Sobol, emulate, explain, morris, sobol
+from studies.engine.sensitivity import EmulatedModel, Sobol, aliased_inputs, emulate, explain, morris, sobol
 from studies.engine.unknowns import load_unknowns, nominal
 
 A, B = 7.0, 0.1
@@ -314,3 +315,63 @@ def test_the_nominal_of_the_registry_holds_a_subset():
         assert back == values[name] if inp.categorical else back == pytest.approx(values[name], rel=1e-9)
     assert r.ranked()[0] == "led_intensity_red"
     assert explain(r)[-1] == f"over 2 of {space.dim} inputs; the other {space.dim - 2} held at nominal"
+
+
+def test_aliased_inputs_are_the_pairs_whose_choices_move_together_at_every_run():
+    """On 16 scrambled Sobol' points of 31 two-choice inputs, the aliased pairs are exactly those whose
+    indicator columns correlate ±1 (computed here directly); only 8 distinct splits exist."""
+    space = InputSpace(tuple(Input(f"c{j}", choices=("a", "b")) for j in range(31)))
+    design = sobol_points(16, space.dim, seed=0)
+    groups = aliased_inputs(space, design)
+    from_groups = {frozenset(p) for g in groups for p in itertools.combinations(g, 2)}
+    r = np.corrcoef((design < 0.5).T.astype(float))
+    direct = {
+        frozenset((f"c{i}", f"c{j}")) for i, j in zip(*np.triu_indices(31, 1), strict=True) if abs(r[i, j]) > 0.999
+    }
+    assert from_groups == direct and len(direct) > 0
+    singles = 31 - sum(len(g) for g in groups)
+    assert len(groups) + singles == 8
+    assert aliased_inputs(space, np.random.default_rng(0).random((64, 31))) == ()
+
+
+def test_a_three_choice_input_aliases_only_with_the_same_split_and_a_constant_one_not_at_all():
+    space = InputSpace(
+        (
+            Input("three", choices=("x", "y", "z")),
+            Input("two", choices=("p", "q")),
+            Input("relabelled", choices=("u", "v", "w")),
+            Input("fixed_a", choices=("m", "n")),
+            Input("fixed_b", choices=("m", "n")),
+            Input("x", 0.0, 1.0),
+        )
+    )
+    q = np.array(
+        [
+            [0.1, 0.2, 0.9, 0.1, 0.2, 0.5],
+            [0.5, 0.7, 0.1, 0.2, 0.1, 0.5],
+            [0.9, 0.7, 0.5, 0.3, 0.4, 0.5],
+            [0.2, 0.1, 0.8, 0.4, 0.3, 0.5],
+        ]
+    )
+    assert aliased_inputs(space, q) == (("three", "relabelled"),)
+
+
+def test_the_explanation_says_when_the_runs_cannot_tell_two_ranked_inputs_apart():
+    """A planted output driven by one of two aliased choices: the sentence names both; with a design that
+    separates them, no such sentence."""
+    space = InputSpace((Input("housing", choices=("white", "black")), Input("paper", choices=("matched", "white")),
+                        Input("x", 0.0, 1.0)))  # fmt: skip
+    rng = np.random.default_rng(3)
+    u = rng.random((24, 3))
+    aliased = u.copy()
+    aliased[:, 1] = np.where(u[:, 0] < 0.5, 0.25, 0.75)
+
+    def model(q):
+        return 5.0 * (q[:, 0] >= 0.5) + 0.1 * q[:, 2]
+
+    for design, expect in ((aliased, True), (u, False)):
+        em = emulate(space, design, model(design), n_restarts=1, seed=0)
+        lines = explain(sobol(em, space, n=256, seed=0), "the far limit", emulated=em)
+        said = [line for line in lines if line.startswith("the 24 runs cannot tell housing and paper apart")]
+        assert bool(said) is expect, lines
+        assert em.aliases == ((("housing", "paper"),) if expect else ())
