@@ -447,7 +447,8 @@ def _report(out: Path, summary: dict) -> None:
         "median": "far limits scored at the median over the points of the unknowns",
     }[t.get("at", "nominal")]
     rep.text(
-        f"Run time {summary['wall_s']:.0f} s; {scored}, the worst of the yaws; a design still working at the "
+        f"Run time {summary['wall_s']:.0f} s (this run's and the interrupted parts' it resumed; runs.json lists "
+        f"every part); {scored}, the worst of the yaws; a design still working at the "
         "farthest range its run tried counts as that range: its limit is at least that.",
         note=True,
     )

@@ -228,7 +228,11 @@ def _report(out: Path, summary: dict) -> None:
             )
     rep.heading("The points")
     rep.table(pd.DataFrame(summary["outputs"]), "Each point's outputs (best tracker)", float_format="{:.3g}")
-    rep.text(f"Run time {summary['wall_s']:.0f} s.", note=True)
+    rep.text(
+        f"Run time {summary['wall_s']:.0f} s: this run's and the interrupted parts' it resumed (a finished "
+        "study run again reads its stored frames; runs.json lists every part).",
+        note=True,
+    )
     rep.write(out / "report.html")
 
 
