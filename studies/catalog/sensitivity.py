@@ -41,7 +41,18 @@ from studies.engine.sweep import Execution
 from studies.engine.tasks import StudyOptions
 from studies.engine.unknowns import Unknown, load_unknowns, nominal
 
-__all__ = ["NAME", "PROBE_RANGE_M", "SOBOL_INPUTS", "UNIT_BUDGET_GRIDS", "Setting", "acting_space", "check", "run"]
+__all__ = [
+    "NAME",
+    "PROBE_RANGE_M",
+    "SOBOL_INPUTS",
+    "UNIT_BUDGET_GRIDS",
+    "Setting",
+    "acting_space",
+    "check",
+    "point_outputs",
+    "run",
+    "study_options",
+]
 
 NAME = "sensitivity"
 PROBE_RANGE_M = 5.0
@@ -70,7 +81,7 @@ class Setting:
 
 def check(setting: Setting) -> None:
     """Refuse a setting no study could run, in one line naming the field (before any work)."""
-    _options(setting).validate()
+    study_options(setting).validate()
 
 
 def acting_space(setting: Setting, names: list[str]) -> tuple[InputSpace, dict[str, Unknown]]:
@@ -88,7 +99,11 @@ def acting_space(setting: Setting, names: list[str]) -> tuple[InputSpace, dict[s
     return InputSpace.from_unknowns(acting), acting
 
 
-def _options(setting: Setting, physics: tuple[dict, ...] = (), source: str = "", quick: bool = True) -> StudyOptions:
+def study_options(
+    setting: Setting, physics: tuple[dict, ...] = (), source: str = "", quick: bool = True
+) -> StudyOptions:
+    """The range-limit options of one unit (the setting's camera, beacon, side, yaw and current) at the
+    points ``physics`` (``source`` says what they are), on the quick grid or the full one."""
     return StudyOptions(
         cameras=(setting.camera,),
         beacons=(setting.beacon,),
@@ -140,7 +155,7 @@ def run(
     t0 = time.perf_counter()
     out = Path(out)
     physics, source = prediction_set.physics_points(points, seed=seed, calibration=calibration)
-    options = _options(setting, physics, source, quick)
+    options = study_options(setting, physics, source, quick)
     options.validate()
     coarse = len(options.ranges_m) * options.seeds
     design = SequentialDesign(target_relative=0.2, max_range_m=20.0, unit_budget_frames=UNIT_BUDGET_GRIDS * coarse)
