@@ -160,7 +160,9 @@ def _plain(v: Any, u: Unknown) -> Any:
     return float(v) if isinstance(v, int | float) and math.isfinite(float(v)) else v
 
 
-def physics_points(n: int, seed: int = 0, calibration: Path | None = REFERENCE_NROY) -> tuple[tuple[dict, ...], str]:
+def physics_points(
+    n: int, seed: int = 0, calibration: Path | None = REFERENCE_NROY, *, choices_apart: bool = False
+) -> tuple[tuple[dict, ...], str]:
     """``n`` points of the unknowns a study runs at for its noise + physics intervals
     (:attr:`studies.engine.tasks.StudyOptions.physics`), and what they are, in words.
 
@@ -169,17 +171,20 @@ def physics_points(n: int, seed: int = 0, calibration: Path | None = REFERENCE_N
     set (``calibration``, a history match's ``nroy.csv``: ``n`` of its points, evenly over it), the
     others, and all of them without a calibration, from their registry ranges (scrambled Sobol',
     ``seed``). Cameras and beacons the calibration did not observe are then predicted over their ranges.
+    ``choices_apart``: no two choices drawn from their ranges move together over the points
+    (:func:`studies.engine.unknowns.sample`; what a sensitivity analysis needs).
     """
     if not isinstance(n, int) or n < 1:
         raise ValueError(f"uncertainty: expected an integer >= 1 (points of the unknowns), got {n!r}")
     registry = {
         k: u for k, u in unknowns_search.load_unknowns().items() if k not in STUDY_AXES and u.namespace != "tracker"
     }
-    points = sample(registry, n, seed=seed)
+    points = sample(registry, n, seed=seed, choices_apart=choices_apart)
+    apart = ", choices kept apart" if choices_apart else ""
     if calibration is None:
         return tuple(
             points
-        ), f"{n} points of the {len(registry)} unknowns from their registry ranges (Sobol', seed {seed})"
+        ), f"{n} points of the {len(registry)} unknowns from their registry ranges (Sobol', seed {seed}{apart})"
     chosen = load(calibration, n)
     if chosen.source != CALIBRATION:
         raise ValueError(f"{calibration}: expected a calibration's nroy.csv, got an unknowns search's samples")
@@ -190,6 +195,6 @@ def physics_points(n: int, seed: int = 0, calibration: Path | None = REFERENCE_N
     which = (
         f"{n} points: {len(covered)} of the {len(registry)} unknowns from the calibration's NROY set "
         f"({Path(calibration).name}, {len(chosen.points)} of its points{reused}), "
-        f"the other {len(registry) - len(covered)} from their registry ranges (Sobol', seed {seed})"
+        f"the other {len(registry) - len(covered)} from their registry ranges (Sobol', seed {seed}{apart})"
     )
     return tuple(points), which

@@ -154,7 +154,7 @@ def run(
     """Run the analysis into ``out``; returns what ``sensitivity.json`` holds (module docstring)."""
     t0 = time.perf_counter()
     out = Path(out)
-    physics, source = prediction_set.physics_points(points, seed=seed, calibration=calibration)
+    physics, source = prediction_set.physics_points(points, seed=seed, calibration=calibration, choices_apart=True)
     options = study_options(setting, physics, source, quick)
     options.validate()
     coarse = len(options.ranges_m) * options.seeds

@@ -55,7 +55,7 @@ from SALib.sample import sobol as sobol_sample
 
 from studies.engine.calibration.emulator import Diagnostics, Emulator, diagnose, fit_emulator, predict
 from studies.engine.calibration.inputs import InputSpace
-from studies.engine.unknowns import Unknown
+from studies.engine.unknowns import Unknown, groups_of
 
 __all__ = [
     "CONF_LEVEL",
@@ -584,11 +584,9 @@ def aliased_inputs(space: InputSpace, design: np.ndarray) -> tuple[tuple[str, ..
     for j, item in enumerate(space.inputs):
         if not item.categorical:
             continue
-        choice = item.choice_index(design[:, j])
-        rank = {c: k for k, c in enumerate(dict.fromkeys(choice.tolist()))}  # in order of first appearance
-        partition = tuple(rank[c] for c in choice.tolist())  # so the same split reads the same
-        if len(rank) > 1:
-            groups.setdefault(partition, []).append(item.name)
+        split = groups_of(item.choice_index(design[:, j]))
+        if max(split) > 0:
+            groups.setdefault(split, []).append(item.name)
     return tuple(tuple(names) for names in groups.values() if len(names) > 1)
 
 

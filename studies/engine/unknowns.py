@@ -50,6 +50,7 @@ __all__ = [
     "apply",
     "data_file_value",
     "fixed",
+    "groups_of",
     "load_unknowns",
     "nominal",
     "sample",
@@ -343,13 +344,21 @@ def fixed(unknowns: dict[str, Unknown], **values: Any) -> dict[str, Unknown]:
     return out
 
 
-def sample(unknowns: dict[str, Unknown], n: int, seed: int, method: str = "sobol") -> list[dict[str, Any]]:
+def sample(
+    unknowns: dict[str, Unknown], n: int, seed: int, method: str = "sobol", *, choices_apart: bool = False
+) -> list[dict[str, Any]]:
     """``n`` sets of values (name → value) for the unknowns; fixed ones stay at their nominal.
 
     ``method``: ``sobol`` (scrambled Sobol' sequence; powers of 2 keep its balance), ``lhs``
     (Latin hypercube) or ``random`` (independent uniform draws). Each varying unknown takes
     one dimension of the unit hypercube, mapped by its distribution's inverse CDF
     (:mod:`scipy.stats`); a choice takes equal shares of it. Same seed, same samples.
+
+    ``choices_apart`` (Sobol' only): a choice takes the next dimension of the sequence in which it
+    splits the points differently from every choice before it (:func:`_apart_dimensions`), so that
+    no two choices move together over the points (16 Sobol' points split into halves in only 8 ways,
+    and in consecutive dimensions many two-choice unknowns share one). A sensitivity analysis needs
+    this (aliased inputs cannot be told apart); an interval over the points does not.
     """
     if not isinstance(n, int) or n < 1:
         raise ValueError(f"n: expected an integer >= 1, got {n!r}")
@@ -360,9 +369,12 @@ def sample(unknowns: dict[str, Unknown], n: int, seed: int, method: str = "sobol
     if d == 0:
         points = np.zeros((n, 0))
     elif method == "sobol":
+        width = d + _SPARE_DIMENSIONS if choices_apart else d
         with warnings.catch_warnings():  # n not a power of 2: still valid points, slightly less balanced
             warnings.filterwarnings("ignore", message=".*balance properties of Sobol.*", category=UserWarning)
-            points = qmc.Sobol(d, scramble=True, seed=seed).random(n)
+            points = qmc.Sobol(width, scramble=True, seed=seed).random(n)
+        if choices_apart:
+            points = points[:, _apart_dimensions(varying, points)]
     elif method == "lhs":
         points = qmc.LatinHypercube(d, seed=seed).random(n)
     else:
@@ -371,6 +383,43 @@ def sample(unknowns: dict[str, Unknown], n: int, seed: int, method: str = "sobol
     return [
         {name: columns[name][i] if name in columns else u.nominal for name, u in unknowns.items()} for i in range(n)
     ]
+
+
+_SPARE_DIMENSIONS = 64
+"""Extra Sobol' dimensions drawn for ``choices_apart`` to pick the choices' dimensions from."""
+
+
+def _apart_dimensions(varying: list[Unknown], points: np.ndarray) -> list[int]:
+    """The dimension of ``points`` each unknown takes: the next unused one for a number, and for a choice
+    the first unused one in which its shares split the points into groups no earlier choice's do (the
+    next unused one when none does: then the split is unavoidable at this number of points)."""
+
+    def split(u: Unknown, j: int) -> tuple[int, ...]:
+        return groups_of(np.minimum((points[:, j] * len(u.choices)).astype(int), len(u.choices) - 1))
+
+    unused = list(range(points.shape[1]))
+    seen: set[tuple[int, ...]] = set()
+    chosen = []
+    for u in varying:
+        j = unused[0]
+        if u.kind == "choice":
+            j = next((c for c in unused if split(u, c) not in seen), j)
+            seen.add(split(u, j))
+        unused.remove(j)
+        chosen.append(j)
+    return chosen
+
+
+def groups_of(labels: np.ndarray | list) -> tuple[int, ...]:
+    """The groups ``labels`` put the points in, numbered in order of first appearance, so that the same
+    split under other labels reads the same.
+
+    >>> groups_of(["b", "a", "b"]) == groups_of([0, 1, 0])
+    True
+    """
+    labels = list(np.asarray(labels).tolist())
+    rank = {c: k for k, c in enumerate(dict.fromkeys(labels))}
+    return tuple(rank[c] for c in labels)
 
 
 def _from_unit(u: Unknown, q: np.ndarray) -> list:

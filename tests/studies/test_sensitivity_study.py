@@ -7,8 +7,9 @@ import json
 
 import pytest
 
-from studies.catalog import sensitivity
+from studies.catalog import prediction_set, sensitivity
 from studies.engine import sequential
+from studies.engine.sensitivity import aliased_inputs
 from tests.helpers.planted_frames import planted_rows, red_bin
 
 
@@ -61,3 +62,14 @@ def test_bad_input_is_refused_in_one_line_before_any_work(monkeypatch, tmp_path,
     code, _, err = invoke(["sensitivity", "--out", str(tmp_path / "o"), *args])
     assert_one_line_error(code, err, field)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("camera", ["canon-t6-18mm", "logitech-c270"])
+def test_the_points_keep_the_cameras_choices_apart(camera):
+    """16 registry points: no two choices acting on the camera and beacon move together (the plain Sobol'
+    design of the 2026-12 runs aliased housing and paper colour for both cameras)."""
+    for apart, expected in ((False, (("paper_colour", "housing"),)), (True, ())):
+        physics, _ = prediction_set.physics_points(16, seed=0, calibration=None, choices_apart=apart)
+        space, _ = sensitivity.acting_space(sensitivity.Setting(camera=camera), list(physics[0]))
+        q = space.to_unit([{name: p[name] for name in space.names} for p in physics])
+        assert aliased_inputs(space, q) == expected

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from scipy.stats import qmc
 
 from camera_models.camera import load_camera, with_overrides
 from pipeline.thesis_tracker import ThesisTrackerSettings
@@ -17,9 +18,11 @@ from scenes.sourced import DataFileError
 from studies.engine.frame import camera_with_overrides, capture_frame, frame_inputs
 from studies.engine.unknowns import (
     KINDS,
+    Unknown,
     apply,
     data_file_value,
     fixed,
+    groups_of,
     load_unknowns,
     nominal,
     sample,
@@ -92,6 +95,29 @@ def test_sobol_mean_of_a_uniform_entry_is_its_midpoint(registry):
         mean = np.mean([s[u.name] for s in values])
         mid = (u.low + u.high) / 2
         assert abs(mean - mid) <= 0.02 * mid, u.name
+
+
+def test_choices_apart_keeps_every_choice_split_its_own_and_each_column_a_sobol_column():
+    """Sixteen points: with ``choices_apart`` no two of six two-choice unknowns move together (in a plain
+    Sobol' design of 16 points they do: its halves split the points in only 8 ways), each choice still
+    takes each share 8 times, and each number still has one point in each sixteenth of its range (a
+    scrambled Sobol' column's stratification, which any of its dimensions keeps)."""
+    choices = {f"c{i}": Unknown(f"c{i}", "scenario.housing", "choice", "a", choices=("a", "b")) for i in range(6)}
+    numbers = {f"x{i}": Unknown(f"x{i}", "scenario.range_m", "uniform", 0.5, low=0.0, high=1.0) for i in range(4)}
+    registry = {**numbers, **choices}
+    apart = sample(registry, 16, seed=0, choices_apart=True)
+    splits = [groups_of([p[name] for p in apart]) for name in choices]
+    assert len(set(splits)) == len(splits)
+    assert all(sorted(split).count(0) == 8 for split in splits)
+    for name in numbers:
+        assert sorted(int(p[name] * 16) for p in apart) == list(range(16)), name
+    assert apart == sample(registry, 16, seed=0, choices_apart=True)
+    plain = sample(numbers, 16, seed=3)  # without it: the sequence's first dimensions, as before
+    q = qmc.Sobol(4, scramble=True, seed=3).random(16)
+    assert np.allclose([[p[name] for name in numbers] for p in plain], q)
+    wide = {f"c{i}": Unknown(f"c{i}", "scenario.housing", "choice", "a", choices=("a", "b")) for i in range(12)}
+    crowded = sample(wide, 16, seed=0, choices_apart=True)
+    assert len({groups_of([p[name] for p in crowded]) for name in wide}) == 8  # all the splits 16 points have
 
 
 def test_fixed_and_nominal(registry):
