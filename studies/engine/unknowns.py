@@ -364,6 +364,8 @@ def sample(
         raise ValueError(f"n: expected an integer >= 1, got {n!r}")
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if choices_apart and method != "sobol":
+        raise ValueError(f"choices_apart: works on the Sobol' sequence's dimensions, not on method {method!r}")
     varying = [u for u in unknowns.values() if u.kind != "fixed"]
     d = len(varying)
     if d == 0:

@@ -112,6 +112,8 @@ def test_choices_apart_keeps_every_choice_split_its_own_and_each_column_a_sobol_
     for name in numbers:
         assert sorted(int(p[name] * 16) for p in apart) == list(range(16)), name
     assert apart == sample(registry, 16, seed=0, choices_apart=True)
+    with pytest.raises(ValueError, match=r"^choices_apart: works on the Sobol' sequence's dimensions"):
+        sample(registry, 16, seed=0, method="lhs", choices_apart=True)
     plain = sample(numbers, 16, seed=3)  # without it: the sequence's first dimensions, as before
     q = qmc.Sobol(4, scramble=True, seed=3).random(16)
     assert np.allclose([[p[name] for name in numbers] for p in plain], q)
