@@ -79,12 +79,16 @@ class PredictionSet:
         :data:`CALIBRATION` or :data:`SEARCH`.
     space
         The unknowns the points set (their registry entries).
+    closest
+        Whether the points are a calibration's least implausible ones (``closest.csv``: none of them
+        consistent with what the study saw), not its NROY set.
     """
 
     points: tuple[dict[str, Any], ...]
     which: str
     source: str
     space: dict[str, Unknown]
+    closest: bool = False
 
     def primary_side(self, index: int) -> str | None:
         """The primary test's side at point ``index`` (None: the set does not say; the test's own)."""
@@ -146,7 +150,7 @@ def load(path: str | Path, limit: int | None = None) -> PredictionSet:
         )
     else:
         which = f"{len(points)} of the {n} points the calibration did not rule out (NROY, {path.name}); {shared}"
-    return PredictionSet(points, which, CALIBRATION, space)
+    return PredictionSet(points, which, CALIBRATION, space, closest=closest)
 
 
 def _plain(v: Any, u: Unknown) -> Any:
@@ -192,9 +196,11 @@ def physics_points(
     for i, point in enumerate(points):
         point.update({k: chosen.points[i % len(chosen.points)][k] for k in covered})
     reused = ", reused" if len(chosen.points) < n else ""
+    kind = "least implausible points (none consistent with what the study saw; " if chosen.closest else "NROY set ("
     which = (
-        f"{n} points: {len(covered)} of the {len(registry)} unknowns from the calibration's NROY set "
-        f"({Path(calibration).name}, {len(chosen.points)} of its points{reused}), "
-        f"the other {len(registry) - len(covered)} from their registry ranges (Sobol', seed {seed}{apart})"
+        f"{n} points: {len(covered)} of the {len(registry)} unknowns from the calibration's {kind}"
+        f"{Path(calibration).name}, {len(chosen.points)} of its points{reused})"
     )
+    if len(covered) < len(registry):
+        which += f", the other {len(registry) - len(covered)} from their registry ranges (Sobol', seed {seed}{apart})"
     return tuple(points), which

@@ -203,7 +203,7 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
         )
         if key in physics:
             iv = physics_interval(physics[key])
-            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv))
+            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv, zero="none"))
         if key in near_physics:
             iv = physics_interval(near_physics[key])
             rec.update(near_physics=iv.to_dict(), near_interval_physics=interval_text(iv))

@@ -220,7 +220,7 @@ def analyse(frame, design: dict | None = None) -> dict:
         )
         if key in far_physics:
             iv = physics_interval(far_physics[key])
-            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv))
+            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv, zero="none"))
         if design is not None:
             unit = units.get((rec["camera"], rec["beacon"], rec["environment"], float(rec["led_current_mA"])))
             rec.update(

@@ -220,10 +220,12 @@ def interval_text(
     unit: str = " m",
     at_least: str = "≥ the farthest tried",
     at_most: str = "≤ the nearest tried",
+    zero: str | None = None,
 ) -> str:
     """A noise + physics interval in words, "3.1 to 6 m (88 %, 16 points)"; ``unit`` follows the
     numbers, ``at_least`` stands for a censored upper end ("3.1 m to ≥ the farthest tried"), ``at_most``
-    for a censored lower one; both ends censored alike read once ("≥ the farthest tried").
+    for a censored lower one, ``zero`` (if given) for an end at 0 (a far limit of 0 is "none": no range
+    worked); two ends that read alike read once ("≥ the farthest tried", "none").
 
     Examples
     --------
@@ -233,20 +235,25 @@ def interval_text(
     '≤ the nearest tried to 4 m (50 %, 3 points)'
     >>> interval_text(physics_interval([3.1, math.inf, math.inf]))
     '3.1 m to ≥ the farthest tried (50 %, 3 points)'
+    >>> interval_text(physics_interval([0.0, 0.0, math.inf]), zero="none")
+    'none to ≥ the farthest tried (50 %, 3 points)'
     """
 
-    def end(x: float) -> str:
-        return at_least if x > 0 else at_most
+    def part(x: float) -> tuple[str, bool]:
+        """The end in words, and whether it is a number (which the unit follows)."""
+        if zero is not None and x == 0:
+            return zero, False
+        if math.isinf(x):
+            return (at_least if x > 0 else at_most), False
+        return f"{x:.3g}", True
 
-    low, high = iv.low, iv.high
-    if math.isfinite(low) and math.isfinite(high):
-        span = f"{low:.3g} to {high:.3g}{unit}"
-    elif math.isfinite(low):
-        span = f"{low:.3g}{unit} to {end(high)}"
-    elif math.isfinite(high):
-        span = f"{end(low)} to {high:.3g}{unit}"
+    (low, low_number), (high, high_number) = part(iv.low), part(iv.high)
+    if low == high and not low_number:
+        span = low
+    elif low_number and high_number:
+        span = f"{low} to {high}{unit}"
     else:
-        span = end(low) if (low > 0) == (high > 0) else f"{end(low)} to {end(high)}"
+        span = f"{low}{unit if low_number else ''} to {high}{unit if high_number else ''}"
     return f"{span} ({100 * iv.rate:.0f} %, {iv.points} points)"
 
 

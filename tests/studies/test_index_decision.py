@@ -275,9 +275,9 @@ def test_noise_plus_physics_intervals_reach_the_answers_and_the_first_line():
     summaries = _summaries()
     physics = {"low": 9.1, "high": None, "rate": 1 - 2 / 17, "points": 16, "order": 1}
     for rec in summaries["range-limit"]["max_range"]:
-        rec.update(far_physics=physics, far_interval_physics="9.1 to ≥ the farthest tried m (88 %, 16 points)")
+        rec.update(far_physics=physics, far_interval_physics="9.1 m to ≥ the farthest tried (88 %, 16 points)")
     result = answers(summaries, {A: "foam + 1 matched sheet", B: "foam + 1 matched sheet"})
-    assert "(95 %: 15 to 19 m; noise + physics: 9.1 to ≥ the farthest tried m (88 %, 16 points))" in result["headline"]
+    assert "(95 %: 15 to 19 m; noise + physics: 9.1 m to ≥ the farthest tried (88 %, 16 points))" in result["headline"]
     chosen = next(c for c in result["decision"]["limits"] if c["camera"] == A)
     assert chosen["far_physics"] == physics and chosen["far_interval"] == "14.6 to 18 m"
     plain = answers(_summaries(), {A: "foam + 1 matched sheet", B: "foam + 1 matched sheet"})

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from studies.engine.uncertainty import order_for, physics_interval
+from studies.engine.uncertainty import interval_text, order_for, physics_interval
 
 
 def _coverage(n_points: int, trials: int, noise_m: float, seed: int) -> tuple[float, float]:
@@ -339,3 +339,20 @@ def test_brightness_diffuser_states_how_often_its_setting_stays_in_the_window(mo
     assert rec["window_points"] == "1 of 3"
     assert (rec["p_physics"]["low"], rec["p_physics"]["high"]) == (0.0, 1.0)
     assert "in the window at 1 of 3 points" in brightness_diffuser.recommendation_text(rec)
+
+
+@pytest.mark.parametrize(
+    ("limits", "text"),
+    [
+        ([0.0] * 16, "none (88 %, 16 points)"),  # 0 = no range worked: "none", not "0 to 0 m"
+        ([0.0] * 15 + [7.0], "none to 7 m (88 %, 16 points)"),
+        ([0.0] * 2 + [math.inf] * 14, "none to ≥ the farthest tried (88 %, 16 points)"),
+        ([4.0] * 2 + [math.inf] * 14, "4 m to ≥ the farthest tried (88 %, 16 points)"),
+        ([3.0, 6.0] + [4.5] * 14, "3 to 6 m (88 %, 16 points)"),
+    ],
+)
+def test_a_far_limit_interval_reads_none_where_no_range_worked(limits, text):
+    """The smallest to the largest of 16 (k = 1: 1 − 2/17 = 88 %), in words; with ``zero`` a far limit
+    of 0 reads "none"."""
+    assert interval_text(physics_interval(limits), zero="none") == text
+    assert interval_text(physics_interval([0.0] * 16)) == "0 to 0 m (88 %, 16 points)"  # without it: a number
