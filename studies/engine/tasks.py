@@ -89,6 +89,24 @@ class StudyOptions:
     physics_source: str = ""
     """What the points are, in words (for reports)."""
 
+    def swept_fields(self) -> frozenset[str]:
+        """Scenario fields the grid itself varies (two or more values). A point of the unknowns leaves
+        them as the grid sets them: brightness-diffuser compares white paper with matched, so the
+        unknown paper colour (V2's as built, which the other studies run) must not overwrite its axis."""
+        values = {
+            "camera": self.cameras,
+            "beacon": self.beacons,
+            "side": self.sides,
+            "range_m": self.ranges_m,
+            "yaw_deg": self.yaws_deg,
+            "environment": self.environments,
+            "led_current_mA": self.currents_mA,
+            "foam": [d[0] for d in self.diffusers],
+            "paper_sheets": [d[1] for d in self.diffusers],
+            "paper_colour": [d[2] for d in self.diffusers],
+        }
+        return frozenset(name for name, v in values.items() if len(set(v)) > 1)
+
     def validate(self) -> None:
         """Fail fast, before any work, with one line naming the bad option."""
 
@@ -241,8 +259,9 @@ def frame_task(
     """The frame task of one condition and noise seed index ``seed`` (≥ 0; jittered pose
     ``seed % options.jitter_poses``): what :func:`frame_tasks` makes for each seed, and what a
     sequential design (:mod:`studies.engine.sequential`) makes for the seeds it adds. A condition's
-    ``point`` (index into ``options.physics``) sets that point's unknowns and tags the frame; the
-    pose jitter does not depend on it (the points are paired)."""
+    ``point`` (index into ``options.physics``) sets that point's unknowns, except on the grid's own
+    axes (:meth:`StudyOptions.swept_fields`), and tags the frame; the pose jitter does not depend on it
+    (the points are paired)."""
     if options.frame not in FRAMES:
         raise ValueError(f"frame: expected one of {', '.join(FRAMES)}, got {options.frame!r}")
     if not isinstance(seed, int) or seed < 0:
@@ -270,5 +289,6 @@ def frame_task(
         task["estimators"] = list(estimators)
     if point is not None:
         task = apply(task, options.physics[point])
+        task["scenario"].update({name: scenario[name] for name in options.swept_fields() if name in scenario})
         task["tags"] = {**(task.get("tags") or {}), "point": point}
     return task

@@ -356,3 +356,22 @@ def test_a_far_limit_interval_reads_none_where_no_range_worked(limits, text):
     of 0 reads "none"."""
     assert interval_text(physics_interval(limits), zero="none") == text
     assert interval_text(physics_interval([0.0] * 16)) == "0 to 0 m (88 %, 16 points)"  # without it: a number
+
+
+def test_a_point_leaves_the_axes_the_study_sweeps_as_the_grid_sets_them():
+    """The unknown paper colour is V2's paper as built: a range-limit task (one diffuser) takes the
+    point's; brightness-diffuser sweeps white against matched paper, so its tasks keep the grid's."""
+    from studies.engine.tasks import StudyOptions, frame_task, grid_conditions
+
+    point = ({"paper_colour": "matched", "housing": "white"},)
+    one = StudyOptions(cameras=("logitech-c270",), diffusers=((True, 1, "white"),), physics=point)
+    swept = one.with_overrides(diffusers=((True, 1, "white"), (True, 1, "matched"), (False, 0, "white")))
+    assert one.swept_fields() == frozenset({"range_m"}) and {"paper_colour", "foam"} <= swept.swept_fields()
+    for options, expected in ((one, {"matched"}), (swept, {"white", "matched"})):
+        at_point = [c for c in grid_conditions(options) if c.get("point") == 0]
+        tasks = [frame_task(c, 0, options) for c in at_point]
+        assert {t["scenario"]["paper_colour"] for t in tasks} == expected
+        assert all(t["scenario"]["housing"] == "white" for t in tasks)  # not an axis: the point's
+        for c, t in zip(at_point, tasks, strict=True):
+            if options is swept:
+                assert t["scenario"]["paper_colour"] == c["paper_colour"] and t["scenario"]["foam"] == c["foam"]
