@@ -30,7 +30,7 @@ import pandas as pd
 
 from scenes.render_cache import atomic_write_bytes
 from studies.catalog import brightness_diffuser, range_limit, webcam_vs_dslr
-from studies.engine.report import FIGURE_DPI, Provenance, Report, page_context, provenance
+from studies.engine.report import FIGURE_DPI, Provenance, Report, join_words, page_context, provenance
 from studies.engine.sequential import design_evidence
 from studies.engine.strict_json import strict_json
 
@@ -563,7 +563,7 @@ def _headline(
 
     if decision.status == TIE:
         return (
-            f"The evidence cannot choose between {_and(decision.contenders)}: their far limits at {yaw} overlap "
+            f"The evidence cannot choose between {join_words(decision.contenders)}: their far limits at {yaw} overlap "
             f"({'; '.join(limit_words(c) for c in decision.contenders)}) and colour separability does not break "
             f"the tie ({', '.join(sep_words(c) for c in decision.contenders)}): run with more frames."
         )
@@ -577,18 +577,13 @@ def _headline(
     if decision.broken_by == BY_SEPARABILITY:
         others = [c for c in decision.contenders if c != cam]
         line += (
-            f" Chosen on colour: its far limit at {yaw} overlaps {_and(others)}'s "
+            f" Chosen on colour: its far limit at {yaw} overlaps {join_words(others)}'s "
             f"({'; '.join(limit_words(c) for c in decision.contenders)}), and its colours separate best "
             f"({', '.join(sep_words(c) for c in decision.contenders)})."
         )
     if limits[cam].decided is False:
         line += f" Its far limit at {yaw} is not decided: run with more frames."
     return line
-
-
-def _and(names: Sequence[str]) -> str:
-    names = list(names)
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def _comparison(decision: Decision, yaws: list[float]) -> list[str]:
@@ -607,10 +602,10 @@ def _agreement(decision: Decision, rl: dict, wv: dict) -> str:
     first = ranking[0]
     wv_far = max((_number(r.get("farthest_tested_m"), 0.0) for r in wv.get("max_range", [])), default=0.0)
     rl_far = max((_number(r.get("farthest_tested_m"), 0.0) for r in rl.get("max_range", [])), default=0.0)
-    wv_yaws = _and([f"{y:g}°" for y in wv.get("yaws_deg", [])] or ["its yaw"])
-    rl_yaws = _and([f"{y:g}°" for y in sorted({r["yaw_deg"] for r in rl.get("max_range", [])})])
+    wv_yaws = join_words([f"{y:g}°" for y in wv.get("yaws_deg", [])] or ["its yaw"])
+    rl_yaws = join_words([f"{y:g}°" for y in sorted({r["yaw_deg"] for r in rl.get("max_range", [])})])
     tied = first.get("tied_on_range") or []
-    why = f"tied on range ({first['far_limit']}) with {_and(tied)}, it is first on colour" if tied else ""
+    why = f"tied on range ({first['far_limit']}) with {join_words(tied)}, it is first on colour" if tied else ""
     return (
         f"webcam-vs-dslr ranks {first['camera']} first on its own sweep ({wv_yaws} only, to {_m(wv_far)} m"
         + (f"; {why}" if why else f"; far limit {first['far_limit']}")

@@ -18,7 +18,7 @@ import functools
 import html
 import io
 import subprocess
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError
@@ -34,6 +34,7 @@ __all__ = [
     "PageContext",
     "Provenance",
     "Report",
+    "join_words",
     "meta_line",
     "page_context",
     "provenance",
@@ -151,6 +152,16 @@ def page_context(
         yield _CONTEXT.get() or PageContext()
     finally:
         _CONTEXT.reset(token)
+
+
+def join_words(words: Sequence[str]) -> str:
+    """Words as a sentence lists them: "a", "a and b", "a, b and c".
+
+    >>> join_words(["housing", "paper_colour", "glare_on"])
+    'housing, paper_colour and glare_on'
+    """
+    words = list(words)
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
 
 
 def meta_line(context: PageContext | None = None) -> str:

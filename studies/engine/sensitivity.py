@@ -55,6 +55,7 @@ from SALib.sample import sobol as sobol_sample
 
 from studies.engine.calibration.emulator import Diagnostics, Emulator, diagnose, fit_emulator, predict
 from studies.engine.calibration.inputs import InputSpace
+from studies.engine.report import join_words
 from studies.engine.unknowns import Unknown, groups_of
 
 __all__ = [
@@ -590,10 +591,6 @@ def aliased_inputs(space: InputSpace, design: np.ndarray) -> tuple[tuple[str, ..
     return tuple(tuple(names) for names in groups.values() if len(names) > 1)
 
 
-def _and(words: Sequence[str]) -> str:
-    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
-
-
 def _percent(x: float) -> str:
     return f"{100 * max(x, 0.0):.0f} %"
 
@@ -658,7 +655,7 @@ def explain(
                 names = [_label(name, unknowns, descriptions) for name in group]
                 lines.insert(
                     0,
-                    f"the {emulated.runs} runs cannot tell {_and(names)} apart: at every run one's value came "
+                    f"the {emulated.runs} runs cannot tell {join_words(names)} apart: at every run one's value came "
                     "with the same value of the other, so how their effect splits between them is the "
                     "emulator's guess; more points (--points) would separate them",
                 )

@@ -40,7 +40,6 @@ __all__ = [
     "far_limits_at_points",
     "interval_text",
     "limits_at_points",
-    "near_limits_at_points",
     "nominal_rows",
     "order_for",
     "over_points",
@@ -191,20 +190,12 @@ def far_limits_at_points(
     return limits_at_points(rows, group, p_working=p_working)[0]
 
 
-def near_limits_at_points(
-    rows: pd.DataFrame, group: list[str], *, p_working: float = P_WORKING
-) -> dict[tuple, list[float]]:
-    """Per ``group`` key, the near limit at each point of the unknowns (m; −∞ for "≤ the nearest range
-    tried"), as :func:`far_limits_at_points`; a point where no range works has no near limit and is
-    left out (its far limit, 0, says so)."""
-    return limits_at_points(rows, group, p_working=p_working)[1]
-
-
 def limits_at_points(
     rows: pd.DataFrame, group: list[str], *, p_working: float = P_WORKING
 ) -> tuple[dict[tuple, list[float]], dict[tuple, list[float]]]:
-    """(far, near) limits at each point of the unknowns, as :func:`far_limits_at_points` and
-    :func:`near_limits_at_points`, from one fit per key and point."""
+    """(far, near) limits at each point of the unknowns, from one fit per key and point: the far ones
+    as :func:`far_limits_at_points`, the near ones in m (−∞ for "≤ the nearest range tried"; a point
+    where no range works has no near limit and is left out: its far limit, 0, says so)."""
     fits = _at_points(rows, group, lambda g: estimate_max_range(g.to_dict("records"), p_working=p_working))
     far = {k: [math.inf if m.at_least else max(float(m.max_range_m), 0.0) for m in ms] for k, ms in fits.items()}
     near = {
