@@ -33,6 +33,7 @@ from studies.catalog import brightness_diffuser, range_limit, webcam_vs_dslr
 from studies.engine.report import FIGURE_DPI, Provenance, Report, join_words, page_context, provenance
 from studies.engine.sequential import design_evidence
 from studies.engine.strict_json import strict_json
+from studies.engine.uncertainty import nominal_rows
 
 __all__ = [
     "ANSWER_LABELS",
@@ -703,20 +704,23 @@ def far_limit_png(limits: Sequence[FarLimit], order: Sequence[str], chosen: str 
 
 def range_limit_diffusers(study_dir: Path) -> dict[str, str]:
     """camera → the diffuser(s) range-limit ran it behind, in words, from its results table
-    (empty when there is none to read)."""
+    (empty when there is none to read).
+
+    Only the nominal frames count: at the points of the unknowns (``--uncertainty``) the paper's
+    colour is one of the unknowns, not the study's setting."""
     columns = ["camera", "foam", "paper_sheets", "paper_colour"]
     frame = None
     try:
         if (study_dir / "results.parquet").is_file():
-            frame = pd.read_parquet(study_dir / "results.parquet", columns=columns)
+            frame = pd.read_parquet(study_dir / "results.parquet")
         elif (study_dir / "results.csv").is_file():
-            frame = pd.read_csv(study_dir / "results.csv", usecols=columns)
-    except (OSError, ValueError, KeyError, ImportError):
+            frame = pd.read_csv(study_dir / "results.csv", usecols=lambda c: c in [*columns, "point"])
+    except (OSError, ValueError, ImportError):
         return {}
-    if frame is None or frame.empty:
+    if frame is None or not set(columns) <= set(frame.columns):
         return {}
     out = {}
-    for cam, g in frame.drop_duplicates().groupby("camera"):
+    for cam, g in nominal_rows(frame)[columns].drop_duplicates().groupby("camera"):
         names = [
             brightness_diffuser.diffuser_text(bool(f), int(n), str(c))
             for f, n, c in g[["foam", "paper_sheets", "paper_colour"]].itertuples(index=False)

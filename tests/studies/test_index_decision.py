@@ -282,3 +282,19 @@ def test_noise_plus_physics_intervals_reach_the_answers_and_the_first_line():
     assert chosen["far_physics"] == physics and chosen["far_interval"] == "14.6 to 18 m"
     plain = answers(_summaries(), {A: "foam + 1 matched sheet", B: "foam + 1 matched sheet"})
     assert "noise + physics" not in plain["headline"] and "far_physics" not in plain["decision"]["limits"][0]
+
+
+@pytest.mark.parametrize("suffix", ["parquet", "csv"])
+def test_the_diffuser_named_is_the_nominal_runs_not_the_points_paper(tmp_path, suffix):
+    """At points of the unknowns the paper's colour is an unknown (white here): the setting the
+    first line names is the one the study ran, matched paper; without points every row counts."""
+    import pandas as pd
+
+    rows = {"camera": ["cam-a"] * 3, "foam": [True] * 3, "paper_sheets": [1] * 3}
+    with_points = pd.DataFrame({**rows, "paper_colour": ["matched", "white", "white"], "point": [None, 0.0, 1.0]})
+    plain = pd.DataFrame({**rows, "paper_colour": ["matched", "white", "white"]})
+    both = "foam + 1 matched sheet or foam + 1 white sheet"
+    for frame, expected in ((with_points, "foam + 1 matched sheet"), (plain, both)):
+        path = tmp_path / f"results.{suffix}"
+        frame.to_parquet(path) if suffix == "parquet" else frame.to_csv(path, index=False)
+        assert index.range_limit_diffusers(tmp_path) == {"cam-a": expected}
