@@ -140,6 +140,15 @@ class FarLimit:
         """Some range reaches P ≥ 0.95."""
         return self.estimate_m > 0
 
+    @property
+    def physics_span_m(self) -> tuple[float, float] | None:
+        """The noise + physics interval as (low, high) in m (high = inf: ≥ the farthest tried; 0: no
+        range works), None without ``--uncertainty``."""
+        if not self.physics:
+            return None
+        high = self.physics.get("high")
+        return max(_number(self.physics.get("low"), 0.0), 0.0), math.inf if high is None else float(high)
+
     def overlaps(self, other: FarLimit) -> bool:
         """The two 95 % intervals share a point (an open-above one reaches every range past its lower bound)."""
         return self.low_m <= other.high_m and other.low_m <= self.high_m
@@ -644,7 +653,9 @@ YAW_STYLES = (("#3b6ea5", "o"), ("#c8553d", "s"), ("#5a8f29", "D"), ("#7b4fa0", 
 
 def far_limit_figure(limits: Sequence[FarLimit], order: Sequence[str], chosen: str | None):
     """The picture: per camera (``order``, top down) and yaw, the far limit (marker) with its
-    95 % interval (line; an arrow where it is open above), the chosen camera marked.
+    95 % interval (line; an arrow where it is open above), the chosen camera marked; with
+    ``--uncertainty`` a wide pale band behind each line, the noise + physics interval (a dot at 0
+    when it is "none" at both ends).
 
     Returns a :class:`matplotlib.figure.Figure` (no pyplot state)."""
     from matplotlib.figure import Figure
@@ -663,6 +674,12 @@ def far_limit_figure(limits: Sequence[FarLimit], order: Sequence[str], chosen: s
             if x is None:
                 continue
             y = i + (j - (len(yaws) - 1) / 2) * step
+            span = x.physics_span_m
+            if span is not None and span[1] > 0:
+                band = [span[0], min(span[1], top * 1.05)]
+                ax.plot(band, [y, y], color=colour, lw=9, alpha=0.18, solid_capstyle="butt")
+            elif span is not None:  # "none" at both ends: a band of no width, shown as a dot at 0
+                ax.plot([0.0], [y], marker="o", ms=10, color=colour, alpha=0.25, ls="none", clip_on=False)
             high = min(x.high_m, top)
             ax.plot([x.low_m, high], [y, y], color=colour, lw=2, solid_capstyle="butt")
             ax.plot([x.low_m, x.low_m], [y - 0.08, y + 0.08], color=colour, lw=1.5)
@@ -672,9 +689,10 @@ def far_limit_figure(limits: Sequence[FarLimit], order: Sequence[str], chosen: s
                 ax.annotate("", xy=(top * 1.05, y), xytext=(top, y), arrowprops={"arrowstyle": "->", "color": colour})
             filled = colour if x.works else "white"
             ax.plot([x.estimate_m], [y], marker=marker, ms=8, color=colour, mfc=filled, ls="none")
-            ax.text(
-                right, y, f"{x.text} ({x.interval})", va="center", ha="left", fontsize=9, color=colour, clip_on=False
-            )
+            label = f"{x.text} ({x.interval})"
+            if span is not None:
+                label += f"; with the unknowns {_span_text(span, top)}"
+            ax.text(right, y, label, va="center", ha="left", fontsize=9, color=colour, clip_on=False)
         ax.plot([], [], marker=marker, color=colour, lw=2, label=f"{yaw:g}° yaw")
     ax.axvline(top, color="#888", ls=":", lw=1)
     ax.set_yticks(range(len(cams)), [f"{c}  ◀ chosen" if c == chosen else c for c in cams], fontsize=10)
@@ -688,6 +706,15 @@ def far_limit_figure(limits: Sequence[FarLimit], order: Sequence[str], chosen: s
     ax.legend(fontsize=9, loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=len(yaws), frameon=False)
     ax.set_title("range-limit, best tracker", fontsize=10, loc="right")
     return fig
+
+
+def _span_text(span: tuple[float, float], top: float) -> str:
+    """A noise + physics interval in the picture's few words: "none to ≥ 20 m", "4.5 to 10.5 m"."""
+    low = "none" if span[0] <= 0 else f"{_m(span[0])}"
+    if span[1] <= 0:
+        return "none"
+    high = f"≥ {_m(top)}" if math.isinf(span[1]) else _m(span[1])
+    return f"{low} to {high} m"
 
 
 def far_limit_png(limits: Sequence[FarLimit], order: Sequence[str], chosen: str | None) -> bytes:
@@ -770,6 +797,13 @@ def write_index(
             "(hollow: no range works), the line its 95 % interval, an arrow an interval open above. The rule "
             "compares them at the largest yaw."
         )
+        physics = next((x.physics for x in limits if x.physics), None)
+        if physics:
+            caption += (
+                f" The wide pale band behind each line is the noise + physics interval: the far limits at "
+                f"{physics['points']} points of the unknowns, a {100 * physics['rate']:.0f} % predictive interval "
+                "(a pale dot at 0: none at both ends)."
+            )
         rep.html(
             f"<figure><img alt='{html.escape(caption)}' src='{FIGURE_NAME}'>"
             f"<figcaption>{html.escape(caption)}</figcaption></figure>"

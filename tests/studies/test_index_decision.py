@@ -298,3 +298,27 @@ def test_the_diffuser_named_is_the_nominal_runs_not_the_points_paper(tmp_path, s
         path = tmp_path / f"results.{suffix}"
         frame.to_parquet(path) if suffix == "parquet" else frame.to_csv(path, index=False)
         assert index.range_limit_diffusers(tmp_path) == {"cam-a": expected}
+
+
+def test_the_picture_draws_the_noise_plus_physics_interval_behind_the_noise_one():
+    """A band from the points' k-th smallest to k-th largest far limit (to the arrow when open
+    above), a dot at 0 for "none" at both ends, and the same in words beside each row."""
+    from dataclasses import replace
+
+    from matplotlib.text import Text
+
+    physics = {"rate": 1 - 2 / 17, "points": 16, "order": 1}
+    open_band = replace(_limit(A, 16, 14, 18), physics={**physics, "low": 4.5, "high": None})
+    closed = replace(_limit(B, 20, 16, math.inf, open_above=True), physics={**physics, "low": 0.0, "high": 11.7})
+    none = replace(_limit(C, 0, 0, 4), physics={**physics, "low": 0.0, "high": 0.0})
+    fig = index.far_limit_figure([open_band, closed, none], [A, B, C], A)
+    ax = fig.axes[0]
+    bands = [line.get_xdata().tolist() for line in ax.get_lines() if line.get_linewidth() == 9]
+    assert bands == [[4.5, 20 * 1.05], [0.0, 11.7]]
+    dots = [line for line in ax.get_lines() if line.get_marker() == "o" and line.get_alpha() is not None]
+    assert len(dots) == 1 and dots[0].get_xdata().tolist() == [0.0]
+    words = [t.get_text() for t in ax.findobj(Text)]
+    for text in ("with the unknowns 4.5 to ≥ 20 m", "with the unknowns none to 11.7 m", "with the unknowns none"):
+        assert any(w.endswith(text) for w in words), text
+    plain = index.far_limit_figure([_limit(A, 16, 14, 18)], [A], A)
+    assert not [line for line in plain.axes[0].get_lines() if line.get_linewidth() == 9]
