@@ -757,7 +757,12 @@ def range_limit_diffusers(study_dir: Path) -> dict[str, str]:
 
 
 def write_index(
-    out: Path, elapsed_s: float | None = None, quick: bool | None = None, made_by: Provenance | None = None
+    out: Path,
+    elapsed_s: float | None = None,
+    quick: bool | None = None,
+    made_by: Provenance | None = None,
+    *,
+    resumed: bool = False,
 ) -> dict:
     """Read ``out/<study>/summary.json`` of the three studies and write ``out/index.html``
     (the decision first, the picture, the table, then links), ``out/far-limits.png`` and
@@ -767,6 +772,7 @@ def write_index(
     ----------
     out : the main job's output directory.
     elapsed_s : the main job's wall time, s (printed when given).
+    resumed : ``elapsed_s`` includes the interrupted parts this run resumed (said on the page).
     quick : the studies ran in their quick form (said on the page); None: not said.
     made_by : the provenance to state (default :func:`studies.engine.report.provenance`).
     """
@@ -823,7 +829,12 @@ def write_index(
     rep.html(f"<ul>{links}</ul>")
     if elapsed_s is not None:
         result["elapsed_s"] = round(float(elapsed_s), 1)
-        rep.text(f"Finished in {elapsed_s:.0f} s.", note=True)
+        rep.text(
+            f"Finished in {elapsed_s:.0f} s"
+            + (", with the interrupted parts this run resumed" if resumed else "")
+            + " (a finished job run again reads its stored frames; runs.json lists every part).",
+            note=True,
+        )
     result["quick_form"] = quick
     result["provenance"] = made_by.to_dict()
     with page_context(quick=quick, provenance=made_by):

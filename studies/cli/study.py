@@ -16,7 +16,7 @@ from studies.cli import options as opt
 from studies.cli.common import UsageError, check_seeds, console, execution, out_path, parse_list, physics_points
 from studies.cli.out_folder import prepare_out_dir
 from studies.engine.report import page_context
-from studies.engine.run_log import timed_part
+from studies.engine.run_log import resumed_seconds, timed_part
 from studies.engine.sequential import SequentialDesign, candidate_ranges
 from studies.engine.sweep import Execution
 from studies.engine.tasks import grid_conditions
@@ -256,6 +256,7 @@ def main_job(
     }
     execution = _execution(workers, None)
     prepare_out_dir(out)
+    earlier_s = resumed_seconds(out, "main-job")
     t0 = time.perf_counter()
     with timed_part(out, "main-job"), page_context(quick=True, index_href="../index.html"):
         for name in MAIN_JOB:
@@ -268,7 +269,7 @@ def main_job(
                 module.run(prepare_out_dir(out / name), options, execution, design=designs[name])
             else:
                 module.run(prepare_out_dir(out / name), options, execution)
-        write_index(out, elapsed_s=time.perf_counter() - t0, quick=True)
+        write_index(out, elapsed_s=earlier_s + time.perf_counter() - t0, quick=True, resumed=earlier_s > 0)
     console.print(f"main job done in {time.perf_counter() - t0:.0f} s: open {out / 'index.html'}")
 
 

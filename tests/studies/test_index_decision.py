@@ -322,3 +322,13 @@ def test_the_picture_draws_the_noise_plus_physics_interval_behind_the_noise_one(
         assert any(w.endswith(text) for w in words), text
     plain = index.far_limit_figure([_limit(A, 16, 14, 18)], [A], A)
     assert not [line for line in plain.axes[0].get_lines() if line.get_linewidth() == 9]
+
+
+def test_the_run_time_says_when_it_includes_resumed_parts(tmp_path):
+    out = _write(tmp_path, _summaries())
+    text = lambda: (out / "index.html").read_text()  # noqa: E731
+    write_index(out, elapsed_s=1234.4, made_by=MADE_BY)
+    assert "Finished in 1234 s (a finished job" in text() and "resumed" not in text()
+    write_index(out, elapsed_s=11452.0, made_by=MADE_BY, resumed=True)
+    assert "Finished in 11452 s, with the interrupted parts this run resumed" in text()
+    assert json.loads((out / "answers.json").read_text())["elapsed_s"] == 11452.0
