@@ -203,7 +203,9 @@ def analyse(frame: pd.DataFrame, design: dict | None = None) -> dict:
         )
         if key in physics:
             iv = physics_interval(physics[key])
-            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv, zero="none"))
+            # each point's far limit in point order (0: no range works; inf, null in JSON: ≥ the farthest tried)
+            far = iv.to_dict() | {"at_points_m": physics[key]}
+            rec.update(far_physics=far, far_interval_physics=interval_text(iv, zero="none"))
         if key in near_physics:
             iv = physics_interval(near_physics[key])
             rec.update(near_physics=iv.to_dict(), near_interval_physics=interval_text(iv))

@@ -220,7 +220,9 @@ def analyse(frame, design: dict | None = None) -> dict:
         )
         if key in far_physics:
             iv = physics_interval(far_physics[key])
-            rec.update(far_physics=iv.to_dict(), far_interval_physics=interval_text(iv, zero="none"))
+            # each point's far limit in point order (0: no range works; inf, null in JSON: ≥ the farthest tried)
+            far = iv.to_dict() | {"at_points_m": far_physics[key]}
+            rec.update(far_physics=far, far_interval_physics=interval_text(iv, zero="none"))
         if design is not None:
             unit = units.get((rec["camera"], rec["beacon"], rec["environment"], float(rec["led_current_mA"])))
             rec.update(

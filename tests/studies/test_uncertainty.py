@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from studies.engine.uncertainty import interval_text, order_for, physics_interval
 
@@ -97,6 +98,10 @@ def test_range_limit_states_the_noise_and_the_noise_plus_physics_intervals(monke
     assert iv["points"] == 16 and iv["rate"] == pytest.approx(1 - 2 / 17)
     assert iv["low"] == pytest.approx(truths[0], abs=1.0) and iv["high"] == pytest.approx(truths[-1], abs=1.0)
     assert iv["low"] < nominal["low_m"] and iv["high"] > nominal["high_m"]  # physics widens it
+    planted = [8.0 + 3.0 * (p["led_intensity_red"] - 5.1) - 0.4 * LN19 for p in points]
+    at_points = iv["at_points_m"]  # each point's far limit, in point order: they follow the planted truths
+    assert (min(at_points), max(at_points)) == (iv["low"], iv["high"])  # order 1 of 16: the extremes
+    assert stats.spearmanr(at_points, planted).statistic > 0.9
     assert "(88 %, 16 points)" in rec["far_interval_physics"]
     with pytest.raises(ValueError, match=r"physics\[0\]\.led_intensity_red: 99 is outside"):
         base.with_overrides(physics=({"led_intensity_red": 99},)).validate()
