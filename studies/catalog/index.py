@@ -710,7 +710,7 @@ def far_limit_figure(limits: Sequence[FarLimit], order: Sequence[str], chosen: s
 
 def _span_text(span: tuple[float, float], top: float) -> str:
     """A noise + physics interval in the picture's few words: "none to ≥ 20 m", "4.5 to 10.5 m"."""
-    low = "none" if span[0] <= 0 else f"{_m(span[0])}"
+    low = "none" if span[0] <= 0 else _m(span[0])
     if span[1] <= 0:
         return "none"
     high = f"≥ {_m(top)}" if math.isinf(span[1]) else _m(span[1])
@@ -807,7 +807,7 @@ def write_index(
         if physics:
             caption += (
                 f" The wide pale band behind each line is the noise + physics interval: the far limits at "
-                f"{physics['points']} points of the unknowns, a {100 * physics['rate']:.0f} % predictive interval "
+                f"{physics['points']} points of the unknowns, a predictive interval at {100 * physics['rate']:.0f} % "
                 "(a pale dot at 0: none at both ends)."
             )
         rep.html(
