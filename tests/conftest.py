@@ -8,6 +8,15 @@ import pytest
 
 
 @pytest.fixture(scope="session", autouse=True)
+def _no_hugepage_advice():
+    """As the command line does (studies.engine.runner.no_hugepage_advice): whole T6 frames
+    otherwise spend most of their time in the kernel zeroing huge pages."""
+    from studies.engine.runner import no_hugepage_advice
+
+    no_hugepage_advice()
+
+
+@pytest.fixture(scope="session", autouse=True)
 def _isolated_cache(tmp_path_factory):
     """Keep the user's render cache out of the tests."""
     os.environ["BEACON_SIM_CACHE"] = str(tmp_path_factory.mktemp("render-cache"))

@@ -36,7 +36,7 @@ from typer._click import exceptions as cli_errors  # typer's own (vendored) clic
 from studies.cli import camera, checks, experiments, hardware, pipeline, robot, scene, study, unknowns
 from studies.cli.common import console
 from studies.cli.out_folder import folder_command, release_out_dirs
-from studies.engine.runner import DISK_FULL, NoWorkersError, RunStopped
+from studies.engine.runner import DISK_FULL, NoWorkersError, RunStopped, no_hugepage_advice
 
 __all__ = [
     "COMMAND_MODULES",
@@ -200,6 +200,7 @@ def main() -> None:
     """Console-script entry point: run one command; bad input is one line on stderr (exit 2),
     Ctrl-C exit 130 with a line saying how to resume."""
     os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    no_hugepage_advice()
     args = sys.argv[1:]
     guard = InterruptGuard()
     code = 0

@@ -74,6 +74,7 @@ from studies.engine.strict_json import decode_non_finite, encode_non_finite
 __all__ = [
     "DASK_POLL_S",
     "DISK_FULL",
+    "HUGEPAGE_ENV",
     "MACHINE_COLUMNS",
     "MACHINE_LOG",
     "NO_WORKER_TIMEOUT_S",
@@ -90,6 +91,7 @@ __all__ = [
     "die_with_parent",
     "disk_full_names",
     "function_name",
+    "no_hugepage_advice",
     "no_progress",
     "open_in_place",
     "run_batch",
@@ -221,12 +223,48 @@ def die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="beacon-sim-parent-watch", daemon=True).start()
 
 
+HUGEPAGE_ENV = "NUMPY_MADVISE_HUGEPAGE"
+"""numpy's switch for asking Linux for transparent huge pages on arrays of 4 MiB and more
+(read when numpy is imported; source: numpy's "Global state" reference, "madvise hugepage on Linux")."""
+
+
+def no_hugepage_advice() -> bool:
+    """Stop numpy asking the kernel for transparent huge pages, in this process and in the
+    processes it starts (unless the user set :data:`HUGEPAGE_ENV` to anything but 0: their choice
+    stands). Returns whether the advice is off in this process.
+
+    Why: where the kernel's huge-page ``defrag`` setting is ``madvise`` (as on the 2-core test
+    machine), every fresh large array numpy advises is compacted and zeroed in 2 MiB pages
+    synchronously at first touch. A T6 frame's ~18 Mpx temporaries made that most of its time:
+    ``beacon-sim capture --camera canon-t6-18mm`` took 8.6 s of user and 15.4 s of kernel time
+    (25.0 s wall) with the advice and 8.9 s and 2.3 s (11.4 s) without it, the same image bytes
+    (2026-12-07; `perf` put 60 % of the samples in the kernel's ``clear_page_erms`` under
+    ``do_huge_pmd_anonymous_page``). It changes no result: only how the kernel backs memory.
+
+    Examples
+    --------
+    >>> no_hugepage_advice() in (True, False)
+    True
+    """
+    if os.environ.get(HUGEPAGE_ENV, "0") != "0":
+        return False
+    os.environ[HUGEPAGE_ENV] = "0"  # spawned workers read it when they import numpy
+    try:  # this process imported numpy already: numpy's own toggle (private, so guarded)
+        from numpy._core.multiarray import _set_madvise_hugepage
+    except ImportError:
+        return False
+    _set_madvise_hugepage(False)
+    return True
+
+
 def worker_start(parent_pid: int) -> None:
     """Pool worker start-up: die at once on SIGINT, writing nothing (a Mitsuba render
-    cancelled by SIGINT would otherwise return a partial image as if it were complete), and
-    die with the parent process ``parent_pid`` (:func:`die_with_parent`)."""
+    cancelled by SIGINT would otherwise return a partial image as if it were complete), die
+    with the parent process ``parent_pid`` (:func:`die_with_parent`), and no huge-page advice
+    (:func:`no_hugepage_advice`)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     die_with_parent(parent_pid)
+    no_hugepage_advice()
 
 
 def run_batch(function: TaskFunction, tasks: list[dict], hardware: HardwareSet | None = None) -> list[list[dict]]:
