@@ -283,6 +283,7 @@ def bench(
         ("two_stage_vs_brute_force", b.two_stage_vs_brute_force),
         ("reuse_vs_rerender", b.reuse_vs_rerender),
         ("frame_vs_memcpy", b.frame_vs_memcpy),
+        ("hugepage_advice", b.hugepage_advice),
         ("whole_frame_paths", b.whole_frame_paths),
         ("blob_grouping", b.blob_grouping),
         ("warm_frames", b.warm_frames),
@@ -302,6 +303,7 @@ def bench(
         "two_stage_vs_brute_force": details["two_stage_vs_brute_force"]["ratio"],
         "reuse_vs_rerender": details["reuse_vs_rerender"]["ratio"],
         "frame_vs_memcpy": details["frame_vs_memcpy"]["ratio"],
+        "hugepage_advice_on_vs_off": details["hugepage_advice"]["ratio"],
         "workers_2_vs_1": details["workers_and_dask"]["workers_2_vs_1"],
         "dask_overhead": details["workers_and_dask"]["dask_overhead"],
         "variant": active_variant().variant,
@@ -359,6 +361,13 @@ def bench(
         "≤ 1.0 s; ≤ 130×",
     )
     t.add_row("  floor: JPEG encode + decode alone / memcpy", f"{frame['jpeg_codec_vs_memcpy']:.0f}×", "")
+    huge = details["hugepage_advice"]
+    t.add_row(
+        "  the same frame with numpy's huge-page advice on / off (kernel time beside; same bytes: "
+        f"{'yes' if huge['same_bytes'] else 'NO'})",
+        f"{huge['ratio']:.1f}× ({huge['advice_on_kernel_s']:.1f} s / {huge['advice_off_kernel_s']:.1f} s)",
+        "",
+    )
     for name, goal in (("canon-t6-18mm", "≤ 0.4 s; ≤ 40×"), ("logitech-c270", "≤ 0.08 s")):
         w = details["whole_frame_paths"][name]
         t.add_row(

@@ -571,17 +571,24 @@ def _run_pool(
 def stop_pool(pool: ProcessPoolExecutor, grace_s: float = 1.0) -> None:
     """Terminate a process pool's workers without waiting for their tasks (SIGTERM, then
     SIGKILL for any still alive after ``grace_s``) and drop its queued tasks."""
-    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
+    table = getattr(pool, "_processes", None) or {}  # the pool's own pid -> process (no public handle)
+    manager = getattr(pool, "_executor_manager_thread", None)
+    for process in list(table.values()):
+        if process.is_alive():
+            process.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)  # drops the pool's references, not the table
+    deadline = time.monotonic() + grace_s
+    if manager is not None:  # the pool's manager thread may still start a worker until it ends
+        manager.join(grace_s)
+    processes = list(table.values())
     for process in processes:
         if process.is_alive():
             process.terminate()
-    pool.shutdown(wait=False, cancel_futures=True)
-    deadline = time.monotonic() + grace_s
     for process in processes:
         process.join(max(0.0, deadline - time.monotonic()))
         if process.is_alive():
             process.kill()
-            process.join(0.5)
+            process.join()  # SIGKILL cannot be caught: it ends, however loaded the machine
 
 
 class worker_threads:

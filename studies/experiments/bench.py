@@ -68,6 +68,7 @@ __all__ = [
     "frame_vs_memcpy",
     "full_grid_estimate",
     "grid_sample",
+    "hugepage_advice",
     "recorded_runs",
     "replication_tables",
     "reuse_vs_rerender",
@@ -217,6 +218,45 @@ def frame_vs_memcpy(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
         "jpeg_encode_decode_s": float(np.median(codec)),
         "jpeg_codec_vs_memcpy": float(np.median(codec)) / memcpy,
         "frame_bytes": int(frame.nbytes),
+    }
+
+
+def hugepage_advice(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
+    """One whole frame (default the T6's) through the camera and both detectors with numpy's
+    huge-page advice on (numpy's default on Linux) and off (the command line's,
+    :func:`studies.engine.runner.no_hugepage_advice`), alternating in this process; wall and
+    kernel (system) CPU time per frame, medians, and whether the saved bytes agree."""
+    from numpy._core.multiarray import _set_madvise_hugepage
+
+    scenario = Scenario(**scenario, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
+    camera = load_camera(scenario.camera)
+    intrinsics = Intrinsics.from_geometry(camera.geometry)
+    radiance = render(scenario)
+    times: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
+    saved: dict[bool, bytes] = {}
+    before = _set_madvise_hugepage(True)
+    try:
+        for seed in range(repeats):
+            for advice in (True, False):
+                _set_madvise_hugepage(advice)
+                t0, k0 = time.perf_counter(), os.times().system
+                cap = capture(radiance, camera, seed, None, full=True)
+                image = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)
+                for tracker in ("thesis", "best"):
+                    detect(image, intrinsics, tracker=tracker, estimator="best")
+                times[advice].append((time.perf_counter() - t0, os.times().system - k0))
+                saved[advice] = cap.image.encoded
+    finally:
+        _set_madvise_hugepage(before)
+    on, off = (np.median(np.array(times[a]), axis=0) for a in (True, False))
+    return {
+        "advice_on_s": float(on[0]),
+        "advice_off_s": float(off[0]),
+        "ratio": float(on[0] / off[0]),
+        "advice_on_kernel_s": float(on[1]),
+        "advice_off_kernel_s": float(off[1]),
+        "same_bytes": saved[True] == saved[False],
+        "repeats": repeats,
     }
 
 

@@ -63,6 +63,7 @@ WORK_FUNCTIONS = {
         "two_stage_vs_brute_force",
         "reuse_vs_rerender",
         "frame_vs_memcpy",
+        "hugepage_advice",
         "workers_and_dask",
         "full_grid_estimate",
         "variant_ratio",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from camera_models.camera import load_camera
-from studies.experiments.bench import BENCH_SCENARIO, frame_vs_memcpy
+from studies.experiments.bench import BENCH_SCENARIO, frame_vs_memcpy, hugepage_advice
 
 
 def test_frame_vs_memcpy_times_a_whole_saved_frame():
@@ -13,6 +13,18 @@ def test_frame_vs_memcpy_times_a_whole_saved_frame():
     assert out["frame_bytes"] == g.width_px * g.height_px * 3  # the whole frame, 8-bit RGB
     assert out["ratio"] == out["frame_s"] / out["memcpy_s"]
     assert out["frame_s"] >= out["camera_s"] + out["detect_s"] > 0
+
+
+def test_hugepage_advice_changes_no_byte_and_leaves_numpy_as_it_found_it():
+    from numpy._core.multiarray import _get_madvise_hugepage
+
+    scenario = {**BENCH_SCENARIO, "camera": "logitech-c270", "foam": False, "paper_sheets": 0, "range_m": 8.0}
+    before = _get_madvise_hugepage()
+    out = hugepage_advice(repeats=1, scenario=scenario)
+    assert out["same_bytes"] is True  # memory backing only: the saved frame is the same
+    assert out["ratio"] == out["advice_on_s"] / out["advice_off_s"]
+    assert out["advice_on_kernel_s"] >= 0 and out["advice_off_kernel_s"] >= 0
+    assert _get_madvise_hugepage() == before
 
 
 def test_grid_hours_is_the_student_t_interval_of_the_mean_batch():
