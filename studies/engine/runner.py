@@ -98,6 +98,7 @@ __all__ = [
     "run_one",
     "run_tasks",
     "selftest_task",
+    "set_hugepage_advice",
     "stop_pool",
     "task_key",
     "without_machine_columns",
@@ -223,6 +224,11 @@ def die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="beacon-sim-parent-watch", daemon=True).start()
 
 
+try:  # numpy's own run-time toggle (private, so guarded; the environment variable is read at import only)
+    from numpy._core.multiarray import _set_madvise_hugepage as _madvise_toggle
+except ImportError:  # pragma: no cover - another numpy layout
+    _madvise_toggle = None
+
 HUGEPAGE_ENV = "NUMPY_MADVISE_HUGEPAGE"
 """numpy's switch for asking Linux for transparent huge pages on arrays of 4 MiB and more
 (read when numpy is imported; source: numpy's "Global state" reference, "madvise hugepage on Linux")."""
@@ -249,12 +255,14 @@ def no_hugepage_advice() -> bool:
     if os.environ.get(HUGEPAGE_ENV, "0") != "0":
         return False
     os.environ[HUGEPAGE_ENV] = "0"  # spawned workers read it when they import numpy
-    try:  # this process imported numpy already: numpy's own toggle (private, so guarded)
-        from numpy._core.multiarray import _set_madvise_hugepage
-    except ImportError:
-        return False
-    _set_madvise_hugepage(False)
-    return True
+    set_hugepage_advice(False)  # this process imported numpy already
+    return _madvise_toggle is not None
+
+
+def set_hugepage_advice(on: bool) -> bool:
+    """Turn numpy's huge-page advice on or off in this process (for arrays allocated from now on);
+    returns the previous setting (False, and nothing changed, where numpy has no such toggle)."""
+    return bool(_madvise_toggle(on)) if _madvise_toggle is not None else False
 
 
 def worker_start(parent_pid: int) -> None:

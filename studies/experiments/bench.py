@@ -50,7 +50,7 @@ from studies.catalog import replication
 from studies.engine import strict_json
 from studies.engine.frame import render_batch_key, simulate_frame
 from studies.engine.run_log import total_seconds
-from studies.engine.runner import run_tasks, worker_threads
+from studies.engine.runner import run_tasks, set_hugepage_advice, worker_threads
 from studies.engine.sweep import Execution, run_frames, sweep_in_chunks
 from studies.engine.tasks import GRID_AXES, RENDER, frame_tasks
 from studies.experiments import equivalence
@@ -226,19 +226,17 @@ def hugepage_advice(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
     huge-page advice on (numpy's default on Linux) and off (the command line's,
     :func:`studies.engine.runner.no_hugepage_advice`), alternating in this process; wall and
     kernel (system) CPU time per frame, medians, and whether the saved bytes agree."""
-    from numpy._core.multiarray import _set_madvise_hugepage
-
     scenario = Scenario(**scenario, led_current_mA=2.0, render=RenderSettings(spp=4, oversampling=2))
     camera = load_camera(scenario.camera)
     intrinsics = Intrinsics.from_geometry(camera.geometry)
     radiance = render(scenario)
     times: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
     saved: dict[bool, bytes] = {}
-    before = _set_madvise_hugepage(True)
+    before = set_hugepage_advice(True)
     try:
         for seed in range(repeats):
             for advice in (True, False):
-                _set_madvise_hugepage(advice)
+                set_hugepage_advice(advice)
                 t0, k0 = time.perf_counter(), os.times().system
                 cap = capture(radiance, camera, seed, None, full=True)
                 image = cv2.imdecode(np.frombuffer(cap.image.encoded, np.uint8), cv2.IMREAD_COLOR)
@@ -247,7 +245,7 @@ def hugepage_advice(repeats: int = 3, scenario: dict = BENCH_SCENARIO) -> dict:
                 times[advice].append((time.perf_counter() - t0, os.times().system - k0))
                 saved[advice] = cap.image.encoded
     finally:
-        _set_madvise_hugepage(before)
+        set_hugepage_advice(before)
     on, off = (np.median(np.array(times[a]), axis=0) for a in (True, False))
     return {
         "advice_on_s": float(on[0]),
